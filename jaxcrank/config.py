@@ -1,0 +1,138 @@
+"""Load and save a :class:`~jaxcrank.params.Mechanism` as TOML, and apply
+command-line overrides.
+
+The file mirrors the pytree: top-level keys are the mechanism's scalar fields,
+tables ``[joint_B]``, ``[joint_C]``, ``[crank_material]``, ``[rod_material]``,
+``[slider_material]``, ``[contact]``, ``[friction]`` its parts. Every value is SI
+(see :class:`~jaxcrank.params.Mechanism`). Unknown keys and wrong types are errors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from .params import Contact, Friction, Joint, Material, Mechanism, ParameterError
+
+_PARTS = {
+    "joint_B": Joint, "joint_C": Joint,
+    "crank_material": Material, "rod_material": Material, "slider_material": Material,
+    "contact": Contact, "friction": Friction,
+}
+_STRING_FIELDS = {"law"}
+_BOOL_FIELDS = {"ideal"}
+
+
+def _fields(cls):
+    return [f.name for f in dataclasses.fields(cls)]
+
+
+def _plain(value):
+    if isinstance(value, (bool, str)):
+        return value
+    arr = np.asarray(value)
+    if arr.ndim:
+        raise ParameterError("only scalar parameters can be written to TOML")
+    return float(arr)
+
+
+def to_dict(mech: Mechanism) -> dict:
+    """Nested plain-Python dict of every parameter (SI)."""
+    out = {}
+    for name in _fields(Mechanism):
+        value = getattr(mech, name)
+        if name in _PARTS:
+            out[name] = {k: _plain(getattr(value, k)) for k in _fields(_PARTS[name])}
+        else:
+            out[name] = _plain(value)
+    return out
+
+
+def _convert(section: str, key: str, value):
+    where = f"{section}.{key}" if section else key
+    if key in _STRING_FIELDS:
+        if not isinstance(value, str):
+            raise ParameterError(f"{where} must be a string, got {value!r}")
+        return value
+    if key in _BOOL_FIELDS:
+        if not isinstance(value, bool):
+            raise ParameterError(f"{where} must be true or false, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{where} must be a number, got {value!r}")
+    return float(value)
+
+
+def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
+    """Build a validated Mechanism from a (possibly partial) nested dict; missing
+    keys keep the values of ``base`` (default: the paper preset)."""
+    merged = to_dict(Mechanism() if base is None else base)
+    for key, value in data.items():
+        if key in _PARTS:
+            if not isinstance(value, dict):
+                raise ParameterError(f"[{key}] must be a table of parameters, got {value!r}")
+            for sub, v in value.items():
+                if sub not in merged[key]:
+                    raise ParameterError(
+                        f"unknown parameter {key}.{sub}; valid keys in [{key}]: {', '.join(merged[key])}")
+                merged[key][sub] = _convert(key, sub, v)
+        elif key in merged:
+            merged[key] = _convert("", key, value)
+        else:
+            raise ParameterError(f"unknown parameter {key!r}; valid top-level keys: {', '.join(merged)}")
+    kwargs = {k: (_PARTS[k](**v) if k in _PARTS else v) for k, v in merged.items()}
+    return Mechanism(**kwargs)
+
+
+def load(path) -> Mechanism:
+    """Read a TOML config; raises ParameterError naming the file on malformed input."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ParameterError(f"{path}: malformed TOML: {err}") from None
+    try:
+        return from_dict(data)
+    except ParameterError as err:
+        raise ParameterError(f"{path}: {err}") from None
+
+
+def dumps(mech: Mechanism) -> str:
+    header = ("# jaxcrank mechanism, SI units (m, kg, s, rad, N, Pa); crank_speed in rad/s.\n"
+              "# Pass back with `jaxcrank simulate --config FILE` to reproduce a run.\n")
+    return header + tomli_w.dumps(to_dict(mech))
+
+
+def save(mech: Mechanism, path) -> None:
+    Path(path).write_text(dumps(mech))
+
+
+def parse_override(text: str) -> tuple[list[str], object]:
+    """``"contact.law=flores"`` -> (["contact", "law"], "flores"); values are TOML literals
+    (numbers, true/false) or bare strings."""
+    if "=" not in text:
+        raise ParameterError(f"override {text!r} must look like key=value, e.g. rod_length=0.41")
+    key, raw = text.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return key.strip().split("."), value
+
+
+def apply_overrides(mech: Mechanism, overrides: list[str]) -> Mechanism:
+    """Apply ``key=value`` overrides (dotted keys for tables) and re-validate."""
+    data: dict = {}
+    for text in overrides:
+        path, value = parse_override(text)
+        if len(path) == 1:
+            data[path[0]] = value
+        elif len(path) == 2:
+            data.setdefault(path[0], {})[path[1]] = value
+        else:
+            raise ParameterError(f"override key {'.'.join(path)!r} is too deep; use table.key=value")
+    return from_dict(data, base=mech)

@@ -1,0 +1,354 @@
+"""Equations of motion of the slider-crank with clearance joints (model.md, Eq. 14).
+
+The solver state is the *deviation from the ideal mechanism* in generalized
+coordinates s, so s = 0 is the ideal motion and the zero-clearance limit is exact
+in floating point. Which coordinates exist depends on which joints are ideal:
+
+========================  ====================================================
+clearance at B and C      s = (dx2, dy2, dtheta2, dx3): 4 degrees of freedom
+ideal B, clearance at C   s = (dtheta2, dx3): rod end B follows the crank pin
+clearance at B, ideal C   s = (dtheta2, dx3): rod end C follows the slider pin
+both ideal                no s: the closed-form mechanism
+========================  ====================================================
+
+A map ``Q = full_positions(s, t)`` gives the full coordinates
+Q = (x2, y2, theta2, x3); the equations of motion are Lagrange's
+``J^T M J s'' = J^T (F - M gamma)`` with ``J = dQ/ds`` and ``gamma = dJ/dt s'``
+computed by forward-mode autodiff, so ideal-joint reactions drop out and are
+recovered afterwards by :func:`jaxcrank.ideal.reactions`.
+
+The state vector (all entries dimensionless, see :func:`state_scales`) is
+``y = (s, s', approach-speed memory per clearance joint, driver work, dissipated work)``.
+The two work entries are accumulated energy flows for the energy balance; they
+do not feed back into the dynamics.
+
+:func:`evaluate` computes every physical quantity at one (t, y); the vector field
+and all outputs use it, so outputs are functions of the solution.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from . import ideal, laws
+from .params import Joint, Material, Mechanism
+
+
+# --------------------------------------------------------------------------- layout
+
+
+def clearance_joints(mech: Mechanism) -> tuple[str, ...]:
+    """Names of the joints with clearance, in state order (static)."""
+    return tuple(name for name, j in (("B", mech.joint_B), ("C", mech.joint_C)) if not j.ideal)
+
+
+def n_dof(mech: Mechanism) -> int:
+    """Number of generalized coordinates s (static)."""
+    return 2 * len(clearance_joints(mech))
+
+
+def state_size(mech: Mechanism) -> int:
+    return 2 * n_dof(mech) + len(clearance_joints(mech)) + 2
+
+
+def length_scale(mech: Mechanism):
+    """Reference length of the deviations, m: the largest clearance (1 m if none)."""
+    clearances = [getattr(mech, f"joint_{j}").clearance for j in clearance_joints(mech)]
+    if not clearances:
+        return jnp.asarray(1.0)
+    return jax.lax.stop_gradient(jnp.max(jnp.stack(clearances)))
+
+
+def state_scales(mech: Mechanism):
+    """Physical value of one unit of each state entry.
+
+    Lengths in clearances l, rod angle in l / L2 rad, velocities in those times
+    omega, approach-speed memory in l omega m/s, work in m2 (L1 omega)(l omega) J.
+    The scales carry no gradient: they only condition the error control, so a
+    scalar ``rtol``/``atol`` means the same for every entry.
+    """
+    ell = length_scale(mech)
+    sg = jax.lax.stop_gradient
+    omega, l2 = sg(mech.crank_speed), sg(mech.rod_length)
+    n = n_dof(mech)
+    if n == 4:
+        q = jnp.stack([ell, ell, ell / l2, ell])
+    elif n == 2:
+        q = jnp.stack([ell / l2, ell])
+    else:
+        q = jnp.zeros(0)
+    k = len(clearance_joints(mech))
+    memory = jnp.full((k,), ell * omega)
+    work = sg(mech.rod_mass * mech.crank_length * omega) * ell * omega
+    return jnp.concatenate([q, q * omega, memory, jnp.stack([work, work])])
+
+
+# --------------------------------------------------------------------------- kinematics
+
+
+def full_positions(mech: Mechanism, s, t):
+    """Full coordinates Q = (x2, y2, theta2, x3) from deviations s at time t."""
+    qi = ideal.positions(mech, t)
+    joints = clearance_joints(mech)
+    if joints == ("B", "C"):
+        return qi + s
+    if not joints:
+        return qi
+    th2 = qi[2] + s[0]
+    x3 = qi[3] + s[1]
+    half = 0.5 * mech.rod_length * jnp.stack([jnp.cos(th2), jnp.sin(th2)])
+    if joints == ("C",):  # ideal B: rod end B on the crank pin
+        centre = ideal.crank_pin(mech, t) + half
+    else:  # ideal C: rod end C on the slider pin
+        centre = jnp.stack([x3, mech.offset]) - half
+    return jnp.stack([centre[0], centre[1], th2, x3])
+
+
+def joint_points(mech: Mechanism, name: str, s, sd, t):
+    """(pin centre, pin velocity, hole centre, hole velocity) of joint ``name``, m and m/s."""
+    one = jnp.ones_like(t)
+    q, qd = jax.jvp(lambda a, b: full_positions(mech, a, b), (s, t), (sd, one))
+    u2 = jnp.stack([jnp.cos(q[2]), jnp.sin(q[2])])
+    half = 0.5 * mech.rod_length * u2
+    half_dot = qd[2] * _perp(half)
+    if name == "B":
+        pin = ideal.crank_pin(mech, t)
+        return pin, mech.crank_speed * _perp(pin), q[:2] - half, qd[:2] - half_dot
+    pin = jnp.stack([q[3], jnp.asarray(mech.offset, dtype=float)])
+    return pin, jnp.stack([qd[3], jnp.zeros_like(qd[3])]), q[:2] + half, qd[:2] + half_dot
+
+
+def penetration_rate(mech: Mechanism, name: str, s, sd, t):
+    """delta_dot of joint ``name`` as a function of the generalized state, m/s."""
+    pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
+    d = pin - hole
+    eps = laws.safe_norm(d)
+    centred = eps > 0.0
+    n = jnp.where(centred, d / jnp.where(centred, eps, 1.0), 0.0)
+    return jnp.dot(n, pin_vel - hole_vel)
+
+
+def _perp(v):
+    """Rotate a planar vector by +90 degrees."""
+    return jnp.stack([-v[1], v[0]])
+
+
+class JointContact(NamedTuple):
+    """Everything about one clearance joint at one instant (SI)."""
+
+    eccentricity: jax.Array  # pin centre minus hole centre, m, (2,)
+    penetration: jax.Array  # delta = |d| - c, m (negative when separated)
+    penetration_rate: jax.Array  # delta_dot, m/s (positive approaching)
+    slip_speed: jax.Array  # v_t, m/s
+    normal_force: jax.Array  # F_n >= 0, N
+    friction_force: jax.Array  # F_t along the tangent, N
+    force_on_pin: jax.Array  # -F_n n + F_t t, N, (2,)
+    pin_point: jax.Array  # contact point on the pin, m, (2,)
+    hole_point: jax.Array  # contact point on the hole, m, (2,)
+    memory_rate: jax.Array  # d(approach-speed memory)/dt, m/s^2
+    dissipation: jax.Array  # power dissipated by damping and friction, W
+    elastic_energy: jax.Array  # energy stored in the contact, J
+
+
+def joint_contact(mech: Mechanism, joint: Joint, pin_material: Material, hole_material: Material,
+                  pin_pos, pin_vel, pin_omega, hole_pos, hole_vel, hole_omega, memory) -> JointContact:
+    """Kinematics and forces of one clearance joint (model.md, paper Eq. 1-13).
+
+    ``memory`` is the approach-speed memory state (m/s). Positions in m,
+    velocities in m/s, angular velocities in rad/s.
+    """
+    d = pin_pos - hole_pos
+    eps = laws.safe_norm(d)
+    centred = eps > 0.0
+    n = jnp.where(centred, d / jnp.where(centred, eps, 1.0), 0.0)
+    tangent = _perp(n)
+    r_h, r_p = joint.hole_radius, joint.pin_radius
+    delta = eps - joint.clearance
+    v_rel = pin_vel - hole_vel
+    delta_dot = jnp.dot(n, v_rel)
+    v_t = jnp.dot(tangent, v_rel) + pin_omega * r_p - hole_omega * r_h
+
+    c = mech.contact
+    compliance = laws.effective_compliance(pin_material.compliance, hole_material.compliance)
+    approach = jnp.maximum(memory, c.min_approach_speed)
+    geometry = dict(hole_radius=r_h, pin_radius=r_p, compliance_sum=compliance, exponent=c.exponent)
+    f_n, f_el = laws.normal_force(c.law, delta, delta_dot, approach, c.restitution, **geometry)
+    fr = mech.friction
+    f_t = laws.friction_force(fr.law, v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
+    # Only the relaxation part here; evaluate() adds d(delta_dot)/dt while separated.
+    memory_rate = jnp.where(delta > 0.0, 0.0, (delta_dot - memory) / c.memory_time)
+    return JointContact(
+        eccentricity=d,
+        penetration=delta,
+        penetration_rate=delta_dot,
+        slip_speed=v_t,
+        normal_force=f_n,
+        friction_force=f_t,
+        force_on_pin=-f_n * n + f_t * tangent,
+        pin_point=pin_pos + r_p * n,
+        hole_point=hole_pos + r_h * n,
+        memory_rate=memory_rate,
+        dissipation=(f_n - f_el) * delta_dot - f_t * v_t,
+        elastic_energy=laws.elastic_energy(c.law, delta, **geometry),
+    )
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+class Frame(NamedTuple):
+    """The mechanism at one instant; SI units, angles in rad."""
+
+    t: jax.Array
+    crank_angle: jax.Array
+    q: jax.Array  # (x2, y2, theta2, x3)
+    qd: jax.Array
+    qdd: jax.Array
+    ideal_q: jax.Array
+    ideal_qd: jax.Array
+    ideal_qdd: jax.Array
+    eccentricity_B: jax.Array
+    eccentricity_C: jax.Array
+    penetration_B: jax.Array
+    penetration_C: jax.Array
+    normal_force_B: jax.Array  # contact force; for an ideal joint, the reaction magnitude
+    normal_force_C: jax.Array
+    friction_force_B: jax.Array
+    friction_force_C: jax.Array
+    slip_speed_B: jax.Array
+    slip_speed_C: jax.Array
+    driving_moment: jax.Array
+    ideal_driving_moment: jax.Array
+    kinetic_energy: jax.Array
+    potential_energy: jax.Array
+    contact_energy: jax.Array
+    driver_work: jax.Array
+    dissipated_work: jax.Array
+    state_rate: jax.Array  # dy/dt of the scaled state
+
+
+def evaluate(mech: Mechanism, t, y) -> Frame:
+    """All physical quantities at time t (s) for scaled state y; also dy/dt."""
+    n = n_dof(mech)
+    joints = clearance_joints(mech)
+    k = len(joints)
+    scale = state_scales(mech)
+    phys = y * scale
+    s, sd, memory = phys[:n], phys[n : 2 * n], phys[2 * n : 2 * n + k]
+    t = jnp.asarray(t, dtype=float)
+    one = jnp.ones_like(t)
+
+    def velocity(s_, t_):
+        return jax.jvp(lambda a, b: full_positions(mech, a, b), (s_, t_), (sd, one))
+
+    (q, qd), (_, gamma) = jax.jvp(velocity, (s, t), (sd, one))
+    mass = ideal.mass_matrix(mech)
+    centre = q[:2]
+    th1 = ideal.crank_angle(mech, t)
+    crank_pin = ideal.crank_pin(mech, t)
+
+    applied = ideal.rod_gravity(mech)
+    contacts = {}
+    memory_rates = []
+    for i, name in enumerate(joints):
+        pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
+        if name == "B":
+            cj = joint_contact(mech, mech.joint_B, mech.crank_material, mech.rod_material,
+                               pin, pin_vel, mech.crank_speed, hole, hole_vel, qd[2], memory[i])
+        else:
+            cj = joint_contact(mech, mech.joint_C, mech.slider_material, mech.rod_material,
+                               pin, pin_vel, 0.0, hole, hole_vel, qd[2], memory[i])
+        f_hole = -cj.force_on_pin
+        arm = cj.hole_point - centre
+        slider_x = cj.force_on_pin[0] if name == "C" else 0.0
+        applied = applied + jnp.stack([f_hole[0], f_hole[1], arm[0] * f_hole[1] - arm[1] * f_hole[0], slider_x])
+        contacts[name] = cj
+        memory_rates.append(cj.memory_rate)
+
+    if n == 4:  # Q = Q_ideal + s: J is the identity, M is diagonal
+        sdd = (applied - mass * gamma) / mass
+        qdd = sdd + gamma
+    elif n == 2:
+        jac = jax.jacfwd(lambda a: full_positions(mech, a, t))(s)
+        lhs = jac.T @ (mass[:, None] * jac)
+        rhs = jac.T @ (applied - mass * gamma)
+        # 2x2 solve in closed form (LAPACK calls cost more than the arithmetic here)
+        det = lhs[0, 0] * lhs[1, 1] - lhs[0, 1] * lhs[1, 0]
+        sdd = jnp.stack([lhs[1, 1] * rhs[0] - lhs[0, 1] * rhs[1], lhs[0, 0] * rhs[1] - lhs[1, 0] * rhs[0]]) / det
+        qdd = jac @ sdd + gamma
+    else:
+        sdd = jnp.zeros(0)
+        qdd = gamma
+
+    if k:
+        # While separated the memory follows d(delta_dot)/dt exactly (the time
+        # derivative of the penetration rates along the motion), so at impact
+        # onset it equals the approach speed without lag; the relaxation term in
+        # memory_rate only erases the offset left by the previous rebound.
+        def rates(s_, sd_, t_):
+            return jnp.stack([penetration_rate(mech, name, s_, sd_, t_) for name in joints])
+
+        _, rate_dot = jax.jvp(rates, (s, sd, t), (sd, sdd, one))
+        separated = jnp.stack([contacts[name].penetration <= 0.0 for name in joints])
+        memory_rates = [r + jnp.where(sep, rd, 0.0) for r, rd, sep in zip(memory_rates, rate_dot, separated)]
+
+    residual = mass * qdd - applied
+    react_b, react_c = ideal.reactions(mech, q, residual, mech.joint_B.ideal, mech.joint_C.ideal)
+    if "B" in contacts:
+        moment = ideal.driving_moment_from_pin_force(mech, t, -contacts["B"].force_on_pin, contacts["B"].pin_point)
+    else:
+        moment = ideal.driving_moment_from_pin_force(mech, t, react_b, crank_pin)
+    dissipation = sum((cj.dissipation for cj in contacts.values()), jnp.zeros(()))
+
+    rate = jnp.concatenate([sd, sdd, jnp.stack(memory_rates) if k else jnp.zeros(0),
+                            jnp.stack([moment * mech.crank_speed, dissipation])]) / scale
+
+    qi, qdi, qddi = ideal.kinematics(mech, t)
+    kinetic = 0.5 * jnp.sum(mass * qd**2)
+    potential = mech.rod_mass * mech.gravity * q[1] + mech.crank_mass * mech.gravity * 0.5 * mech.crank_length * jnp.sin(th1)
+    zero2, zero = jnp.zeros(2), jnp.zeros(())
+
+    def pick(name, field, ideal_value):
+        return getattr(contacts[name], field) if name in contacts else ideal_value
+
+    return Frame(
+        t=t,
+        crank_angle=th1,
+        q=q,
+        qd=qd,
+        qdd=qdd,
+        ideal_q=qi,
+        ideal_qd=qdi,
+        ideal_qdd=qddi,
+        eccentricity_B=pick("B", "eccentricity", zero2),
+        eccentricity_C=pick("C", "eccentricity", zero2),
+        penetration_B=pick("B", "penetration", zero),
+        penetration_C=pick("C", "penetration", zero),
+        normal_force_B=pick("B", "normal_force", laws.safe_norm(react_b)),
+        normal_force_C=pick("C", "normal_force", laws.safe_norm(react_c)),
+        friction_force_B=pick("B", "friction_force", zero),
+        friction_force_C=pick("C", "friction_force", zero),
+        slip_speed_B=pick("B", "slip_speed", zero),
+        slip_speed_C=pick("C", "slip_speed", zero),
+        driving_moment=moment,
+        ideal_driving_moment=ideal.driving_moment(mech, t),
+        kinetic_energy=kinetic,
+        potential_energy=potential,
+        contact_energy=sum((cj.elastic_energy for cj in contacts.values()), jnp.zeros(())),
+        driver_work=phys[-2],
+        dissipated_work=phys[-1],
+        state_rate=rate,
+    )
+
+
+def vector_field(t, y, mech: Mechanism):
+    """dy/dt for diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=mech``."""
+    return evaluate(mech, t, y).state_rate
+
+
+def initial_state(mech: Mechanism):
+    """Pins centred and moving with the ideal mechanism; memories and work zero."""
+    return jnp.zeros(state_size(mech))
