@@ -121,14 +121,33 @@ def joint_points(mech: Mechanism, name: str, s, sd, t):
     return pin, jnp.stack([qd[3], jnp.zeros_like(qd[3])]), q[:2] + half, qd[:2] + half_dot
 
 
+def memory_target(eccentricity, relative_velocity, clearance):
+    """The normal speed the approach-speed memory tracks, m/s.
+
+    ``d . v / max(|d|, c/2)``: equal to delta_dot = n . v wherever an impact can
+    start (|d| >= c/2), and smooth near the centre, where n = d/|d| has
+    derivatives ~1/|d| that would blow up gradients after the pins-centred start.
+    """
+    eps = laws.safe_norm(eccentricity)
+    return jnp.dot(eccentricity, relative_velocity) / jnp.maximum(eps, 0.5 * clearance)
+
+
+def memory_tracking(penetration, freeze_width):
+    """Weight in [0, 1] of the approach-speed memory's motion: 1 while the joint
+    is separated by more than ``freeze_width`` (m), 0 from contact onset on, and a
+    C2 quintic blend in between. A sharp switch at delta = 0 would make d(memory)/dt
+    jump at the onset, and reverse-mode gradients through a fixed-step discrete
+    solve miss the resulting saltation term (measured: 2.4e-4 relative error in
+    d/d(clearance)). The blend ends before contact, where the force is still zero.
+    """
+    x = jnp.clip(-penetration / freeze_width, 0.0, 1.0)
+    return x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+
+
 def penetration_rate(mech: Mechanism, name: str, s, sd, t):
-    """delta_dot of joint ``name`` as a function of the generalized state, m/s."""
+    """Memory target (:func:`memory_target`) of joint ``name`` from the generalized state, m/s."""
     pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
-    d = pin - hole
-    eps = laws.safe_norm(d)
-    centred = eps > 0.0
-    n = jnp.where(centred, d / jnp.where(centred, eps, 1.0), 0.0)
-    return jnp.dot(n, pin_vel - hole_vel)
+    return memory_target(pin - hole, pin_vel - hole_vel, getattr(mech, f"joint_{name}").clearance)
 
 
 def _perp(v):
@@ -148,7 +167,8 @@ class JointContact(NamedTuple):
     force_on_pin: jax.Array  # -F_n n + F_t t, N, (2,)
     pin_point: jax.Array  # contact point on the pin, m, (2,)
     hole_point: jax.Array  # contact point on the hole, m, (2,)
-    memory_rate: jax.Array  # d(approach-speed memory)/dt, m/s^2
+    memory_rate: jax.Array  # relaxation part of d(approach-speed memory)/dt, m/s^2
+    memory_tracking: jax.Array  # 1 while separated, 0 in contact (see memory_tracking)
     dissipation: jax.Array  # power dissipated by damping and friction, W
     elastic_energy: jax.Array  # energy stored in the contact, J
 
@@ -179,7 +199,9 @@ def joint_contact(mech: Mechanism, joint: Joint, pin_material: Material, hole_ma
     fr = mech.friction
     f_t = laws.friction_force(fr.law, v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
     # Only the relaxation part here; evaluate() adds d(delta_dot)/dt while separated.
-    memory_rate = jnp.where(delta > 0.0, 0.0, (delta_dot - memory) / c.memory_time)
+    target = memory_target(d, v_rel, joint.clearance)
+    tracking = memory_tracking(delta, c.freeze_width)
+    memory_rate = tracking * (target - memory) / c.memory_time
     return JointContact(
         eccentricity=d,
         penetration=delta,
@@ -191,6 +213,7 @@ def joint_contact(mech: Mechanism, joint: Joint, pin_material: Material, hole_ma
         pin_point=pin_pos + r_p * n,
         hole_point=hole_pos + r_h * n,
         memory_rate=memory_rate,
+        memory_tracking=tracking,
         dissipation=(f_n - f_el) * delta_dot - f_t * v_t,
         elastic_energy=laws.elastic_energy(c.law, delta, **geometry),
     )
@@ -292,8 +315,7 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
             return jnp.stack([penetration_rate(mech, name, s_, sd_, t_) for name in joints])
 
         _, rate_dot = jax.jvp(rates, (s, sd, t), (sd, sdd, one))
-        separated = jnp.stack([contacts[name].penetration <= 0.0 for name in joints])
-        memory_rates = [r + jnp.where(sep, rd, 0.0) for r, rd, sep in zip(memory_rates, rate_dot, separated)]
+        memory_rates = [r + contacts[name].memory_tracking * rd for r, rd, name in zip(memory_rates, rate_dot, joints)]
 
     residual = mass * qdd - applied
     react_b, react_c = ideal.reactions(mech, q, residual, mech.joint_B.ideal, mech.joint_C.ideal)

@@ -144,6 +144,10 @@ class Contact(eqx.Module):
             during contact it is frozen, so it holds the speed at the onset of
             the impact. Must be shorter than the free flights between impacts
             (0.1-1 ms here); shorter values make the problem stiffer.
+        freeze_width: penetration range just before contact, m, over which the
+            memory is frozen smoothly rather than with a jump (keeps reverse-mode
+            gradients exact through impact onsets; see ``model.memory_tracking``).
+            The contact force is zero there, so its value barely affects physics.
     """
 
     law: str = eqx.field(static=True, default="hybrid")
@@ -151,6 +155,7 @@ class Contact(eqx.Module):
     exponent: float = 1.5
     min_approach_speed: float = 1e-3
     memory_time: float = 1e-5
+    freeze_width: float = 1e-7
 
     def __check_init__(self):
         if self.law not in CONTACT_LAWS:
@@ -161,6 +166,7 @@ class Contact(eqx.Module):
         _check("exponent", self.exponent, low=1.0, high=3.0, low_open=False, high_open=False)
         _check("min_approach_speed", self.min_approach_speed, low=0.0, unit="m/s")
         _check("memory_time", self.memory_time, low=0.0, unit="s")
+        _check("freeze_width", self.freeze_width, low=0.0, unit="m")
 
 
 class Friction(eqx.Module):

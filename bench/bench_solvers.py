@@ -1,0 +1,134 @@
+"""Benchmark: jaxcrank's solvers against scipy's on the same vector field.
+
+    python bench/bench_solvers.py [--t1 0.4] [--window 0.02] [--out bench/results/solvers.json]
+
+Measures, on this machine's CPU:
+- the paper run (``--t1`` s, default 0.4) with the default solver: compile time,
+  wall time after compile, steps, headline metrics;
+- on a shorter ``--window`` (default 0.02 s, the slow baselines would take
+  minutes on the full run): every diffrax solver and scipy's LSODA and Radau
+  (with the jitted Jacobian) on the same jitted vector field at the same
+  tolerances, wall time and steps, and the agreement of the window's metrics;
+- reverse-mode gradient time of a window metric against the forward time.
+Writes one JSON file; nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import scipy.integrate
+
+import jaxcrank as jc
+from jaxcrank import model, outputs, solve
+
+
+def _timed(fn):
+    start = time.perf_counter()
+    out = fn()
+    jax.block_until_ready(out)
+    return out, time.perf_counter() - start
+
+
+def jax_run(mech, t1, solver, tol, n_samples):
+    ts = jnp.linspace(0.0, t1, n_samples)
+    # the first call compiles; the second is timed as the run
+    sim, first = _timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
+    sim, wall = _timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
+    cols = outputs.trajectory(sim)
+    return {"solver": solver, "wall_s": wall, "compile_s": max(first - wall, 0.0), "steps": int(sim.num_steps),
+            "rejected": int(sim.num_rejected), "metrics": outputs.metrics(cols, mech, t_start=0.0)}
+
+
+def scipy_run(mech, t1, method, tol, n_samples):
+    f = jax.jit(lambda t, y: model.vector_field(t, y, mech))
+    jac = jax.jit(jax.jacfwd(lambda t, y: model.vector_field(t, y, mech), argnums=1))
+    y0 = np.zeros(model.state_size(mech))
+    f(0.0, y0).block_until_ready()
+    jac(0.0, y0).block_until_ready()
+    ts = np.linspace(0.0, t1, n_samples)
+    kwargs = {"jac": lambda t, y: np.asarray(jac(t, y))} if method in ("Radau", "BDF", "LSODA") else {}
+    start = time.perf_counter()
+    sol = scipy.integrate.solve_ivp(lambda t, y: np.asarray(f(t, y)), (0.0, t1), y0, method=method, t_eval=ts,
+                                    rtol=tol, atol=tol, **kwargs)
+    wall = time.perf_counter() - start
+    sim = solve.Simulation(mech, jnp.asarray(sol.t), jnp.asarray(sol.y.T), None, jnp.asarray(sol.nfev), jnp.asarray(0))
+    cols = outputs.trajectory(sim)
+    return {"solver": f"scipy-{method}", "wall_s": wall, "compile_s": 0.0, "steps": None, "nfev": int(sol.nfev),
+            "njev": int(getattr(sol, "njev", 0) or 0), "success": bool(sol.success),
+            "metrics": outputs.metrics(cols, mech, t_start=0.0)}
+
+
+def gradient_timing(mech, t1, tol):
+    ts = jnp.linspace(0.0, t1, 201)
+
+    def objective(l1, l2):
+        m = eqx.tree_at(lambda x: (x.crank_length, x.rod_length), mech, (l1, l2))
+        return outputs.rms_transmission_error(solve.simulate(m, ts=ts, rtol=tol, atol=tol, max_steps=1_000_000), t_start=0.0)
+
+    fwd = jax.jit(objective)
+    grad = jax.jit(jax.grad(objective, argnums=(0, 1)))
+    args = (jnp.asarray(mech.crank_length), jnp.asarray(mech.rod_length))
+    _, fwd_first = _timed(lambda: fwd(*args))
+    _, fwd_wall = _timed(lambda: fwd(*args))
+    _, grad_first = _timed(lambda: grad(*args))
+    g, grad_wall = _timed(lambda: grad(*args))
+    return {"window_s": t1, "forward_wall_s": fwd_wall, "forward_compile_s": fwd_first - fwd_wall,
+            "gradient_wall_s": grad_wall, "gradient_compile_s": grad_first - grad_wall,
+            "gradient_over_forward": grad_wall / fwd_wall, "gradient": [float(x) for x in g]}
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--t1", type=float, default=0.4)
+    p.add_argument("--window", type=float, default=0.02)
+    p.add_argument("--tol", type=float, default=1e-6)
+    p.add_argument("--solvers", default="tsit5,dopri5,kvaerno5")
+    p.add_argument("--scipy", default="LSODA,Radau")
+    p.add_argument("--out", type=Path, default=Path("bench/results/solvers.json"))
+    args = p.parse_args()
+    mech = jc.paper()
+    report = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "jax": jax.__version__,
+                          "device": str(jax.devices()[0])},
+              "tolerance": args.tol}
+    print(f"paper run, {args.t1} s, default solver {solve.DEFAULT_SOLVER} ...", flush=True)
+    report["paper_run"] = jax_run(mech, args.t1, solve.DEFAULT_SOLVER, args.tol, int(args.t1 * 36000) + 1)
+    print(json.dumps(report["paper_run"], indent=1), flush=True)
+    window = []
+    n = int(args.window * 36000) + 1
+    for name in args.solvers.split(","):
+        print(f"window {args.window} s: {name} ...", flush=True)
+        window.append(jax_run(mech, args.window, name, args.tol, n))
+        print(f"  {window[-1]['wall_s']:.3f} s", flush=True)
+    for method in filter(None, args.scipy.split(",")):
+        print(f"window {args.window} s: scipy {method} ...", flush=True)
+        window.append(scipy_run(mech, args.window, method, args.tol, n))
+        print(f"  {window[-1]['wall_s']:.3f} s", flush=True)
+    base = next(r for r in window if r["solver"] == solve.DEFAULT_SOLVER)
+    for r in window:
+        r["speedup_of_default"] = r["wall_s"] / base["wall_s"]
+        r["max_slider_dev_rel_diff_vs_default"] = abs(
+            r["metrics"]["max_abs_slider_x_deviation_m"] - base["metrics"]["max_abs_slider_x_deviation_m"]
+        ) / base["metrics"]["max_abs_slider_x_deviation_m"]
+    report["window"] = {"t1_s": args.window, "runs": window}
+    print("gradient timing ...", flush=True)
+    report["gradient"] = gradient_timing(mech, args.window, args.tol)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=2))
+    print(json.dumps({k: v for k, v in report.items() if k != "window"}, indent=1))
+    for r in window:
+        print(f"{r['solver']:>14}: {r['wall_s']:8.3f} s  ({r['speedup_of_default']:.1f}x default)")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,93 @@
+"""Contact and friction laws against known facts."""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcrank as jc
+from jaxcrank import impact, laws
+
+from .helpers import frictionless, with_law
+
+
+def test_hertz_stiffness_paper_value(paper):
+    # model.md: steel on steel, 8 / 7.5 mm: K = 5.25e10 N/m^1.5
+    s = paper.crank_material.compliance + paper.rod_material.compliance
+    k = laws.hertz_stiffness(8e-3, 7.5e-3, s)
+    assert abs(float(k) - 5.25e10) / 5.25e10 < 1e-3
+
+
+def test_hybrid_force_matches_eq7_as_written():
+    s = 2 * (1 - 0.3**2) / 207e9
+    c, d = 5e-4, 2e-5
+    e_star = 1 / s
+    kn = math.pi / 8 * e_star * math.sqrt(2 * d * (3 * c + 2 * d) ** 2 / (c + d) ** 3)
+    assert float(laws.hybrid_elastic_force(d, c, s)) == pytest.approx(kn * d**1.5, rel=1e-12)
+
+
+@pytest.mark.parametrize("law", jc.CONTACT_LAWS)
+@pytest.mark.parametrize("restitution", [0.3, 0.5, 0.7, 0.9])
+def test_single_impact_restitution_follows_exact_relation(paper, law, restitution):
+    mech = frictionless(with_law(paper, law, restitution))
+    achieved = float(impact.rebound_ratio(mech))
+    expected = laws.achieved_restitution(float(laws.hysteresis_factor(law, restitution)))
+    assert abs(achieved - expected) / expected < 0.01
+
+
+def test_lankarani_nikravesh_cannot_reach_low_restitution():
+    # model.md: LN never gives e below about 0.66
+    chi_max = float(laws.hysteresis_factor("lankarani_nikravesh", 1e-9))
+    assert laws.achieved_restitution(chi_max) > 0.6
+    assert laws.achieved_restitution(float(laws.hysteresis_factor("flores", 0.3))) < 0.3
+
+
+def test_achieved_restitution_solves_relation():
+    for chi in [0.01, 0.3, 1.0, 3.0]:
+        e = laws.achieved_restitution(chi)
+        assert chi * (1 + e) == pytest.approx(math.log((1 + chi) / (1 - chi * e)), rel=1e-10)
+
+
+@pytest.mark.parametrize("law", jc.CONTACT_LAWS)
+def test_normal_force_zero_when_separated_and_gradients_finite(law):
+    s = 2 * (1 - 0.3**2) / 207e9
+    kw = dict(hole_radius=8e-3, pin_radius=7.5e-3, compliance_sum=s)
+
+    def f(pen):
+        return laws.normal_force(law, pen, 0.1, 0.5, 0.9, **kw)[0]
+
+    for pen in [-1e-5, 0.0, 1e-12, 1e-5]:
+        g = jax.grad(f)(pen)
+        assert np.isfinite(float(g))
+    assert float(f(-1e-5)) == 0.0 and float(f(0.0)) == 0.0
+    assert float(f(1e-5)) > 0.0
+
+
+def test_elastic_energy_is_integral_of_force():
+    s = 2 * (1 - 0.3**2) / 207e9
+    kw = dict(hole_radius=8e-3, pin_radius=7.5e-3, compliance_sum=s)
+    for law in ["hybrid", "lankarani_nikravesh"]:
+        d = 3e-5
+        x = np.linspace(0, d, 20001)
+        f = np.asarray(jax.vmap(lambda p: laws.elastic_force(law, p, **kw))(x))
+        trapz = float(np.sum((f[1:] + f[:-1]) * np.diff(x)) / 2)
+        assert float(laws.elastic_energy(law, d, **kw)) == pytest.approx(trapz, rel=1e-6)
+
+
+@pytest.mark.parametrize("law", jc.FRICTION_LAWS)
+def test_friction_ramp_and_sign(law):
+    v0, v1 = 1e-4, 1e-2
+    assert float(laws.friction_ramp(law, 0.5 * v0, v0, v1)) == 0.0
+    assert float(laws.friction_ramp(law, 2 * v1, v0, v1)) == 1.0
+    assert float(laws.friction_force(law, 1.0, 100.0, 0.1, v0, v1)) == pytest.approx(-10.0)
+    assert float(laws.friction_force(law, -1.0, 100.0, 0.1, v0, v1)) == pytest.approx(10.0)
+    for v in [0.0, v0, 0.5 * (v0 + v1), v1]:
+        assert np.isfinite(float(jax.grad(lambda u: laws.friction_force(law, u, 100.0, 0.1, v0, v1))(v)))
+
+
+def test_safe_norm_gradient_at_zero():
+    g = jax.grad(lambda v: laws.safe_norm(v))(jnp.zeros(2))
+    assert np.all(np.isfinite(np.asarray(g)))
