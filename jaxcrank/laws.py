@@ -66,13 +66,6 @@ def hybrid_elastic_force(penetration, clearance, compliance_sum):
     return (math.pi / 8.0) * e_star * math.sqrt(2.0) * (3.0 * clearance + 2.0 * d) * d**2 / (clearance + d) ** 1.5
 
 
-def hybrid_stiffness_ratio(penetration, clearance, compliance_sum, hole_radius, pin_radius):
-    """K_n(delta) / K: the hybrid law's stiffness relative to Lankarani-Nikravesh."""
-    d = jnp.maximum(penetration, 0.0)
-    kn_over_sqrt = (math.pi / 8.0) / compliance_sum * math.sqrt(2.0) * (3.0 * clearance + 2.0 * d) / (clearance + d) ** 1.5
-    return kn_over_sqrt * jnp.sqrt(d) / hertz_stiffness(hole_radius, pin_radius, compliance_sum)
-
-
 # --------------------------------------------------------------------------- hysteresis
 
 

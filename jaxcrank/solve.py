@@ -10,7 +10,6 @@ clearance x crank speed), so ``rtol = atol = 1e-6`` resolves positions to about
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import diffrax
@@ -88,8 +87,7 @@ def _solve(mech, ts, solver, controller, dt0, max_steps, adjoint, progress_meter
 
 def sample_times(mech: Mechanism, t1=None, n_samples=None, t0=0.0):
     """Equally spaced sample times (equal crank-angle steps), s. Defaults: four
-    revolutions (0.4 s at 600 rpm), 100 samples per revolution per degree... i.e.
-    one sample every 0.1 degree of crank angle."""
+    revolutions (0.4 s at 600 rpm), one sample every 0.1 degree of crank angle."""
     period = 2.0 * math.pi / float(mech.crank_speed)
     t1 = 4.0 * period if t1 is None else float(t1)
     if n_samples is None:
@@ -139,7 +137,7 @@ def simulate(mech: Mechanism, t1=None, *, ts=None, n_samples=None, solver=DEFAUL
 def check(sim: Simulation, max_steps=None) -> Simulation:
     """Raise :class:`SimulationError` with advice if ``sim`` failed or is not finite."""
     finite = jnp.all(jnp.isfinite(sim.ys))
-    if isinstance(finite, jax.core.Tracer) or isinstance(sim.result._value, jax.core.Tracer):
+    if isinstance(finite, jax.core.Tracer):  # inside jit/grad/vmap: fail at run time
         ys = eqx.error_if(sim.ys, jnp.invert(finite), "jaxcrank: the solve produced non-finite values")
         ys = eqx.error_if(ys, sim.result != diffrax.RESULTS.successful,
                           "jaxcrank: the solve did not finish (step budget or step size); "
@@ -162,11 +160,3 @@ def check(sim: Simulation, max_steps=None) -> Simulation:
             "stiffness or tiny memory_time), or tighten rtol/atol."
         )
     return sim
-
-
-def timed_simulate(mech: Mechanism, **kwargs):
-    """:func:`simulate`, blocking until done; returns ``(sim, wall_seconds)``."""
-    start = time.perf_counter()
-    sim = simulate(mech, **kwargs)
-    jax.block_until_ready(sim.ys)
-    return sim, time.perf_counter() - start
