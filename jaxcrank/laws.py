@@ -29,6 +29,12 @@ def safe_norm(v, axis=-1):
     return jnp.where(positive, jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
 
 
+def smoothstep(x):
+    """C2 quintic step 10x^3 - 15x^4 + 6x^5 of x clipped to [0, 1]: 0 at x <= 0, 1 at x >= 1."""
+    x = jnp.clip(x, 0.0, 1.0)
+    return x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+
+
 def positive_power(x, p):
     """x**p for x > 0, else 0; finite gradient everywhere (p >= 1)."""
     positive = x > 0.0
@@ -145,12 +151,11 @@ def friction_ramp(law: str, slip_speed, stick_speed, full_slip_speed):
     ``ambrosio``: 0 up to v0, linear to 1 at v1, 1 above (Ambrosio 2002).
     ``smooth``: the same with a C2 quintic ramp 10x^3 - 15x^4 + 6x^5.
     """
-    speed = jnp.abs(slip_speed)
-    x = jnp.clip((speed - stick_speed) / (full_slip_speed - stick_speed), 0.0, 1.0)
+    x = (jnp.abs(slip_speed) - stick_speed) / (full_slip_speed - stick_speed)
     if law == "ambrosio":
-        return x
+        return jnp.clip(x, 0.0, 1.0)
     if law == "smooth":
-        return x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+        return smoothstep(x)
     raise ValueError(f"unknown friction law {law!r}")
 
 

@@ -140,11 +140,10 @@ def memory_tracking(penetration, freeze_width):
     solve miss the resulting saltation term (measured: 2.4e-4 relative error in
     d/d(clearance)). The blend ends before contact, where the force is still zero.
     """
-    x = jnp.clip(-penetration / freeze_width, 0.0, 1.0)
-    return x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
+    return laws.smoothstep(-penetration / freeze_width)
 
 
-def penetration_rate(mech: Mechanism, name: str, s, sd, t):
+def state_memory_target(mech: Mechanism, name: str, s, sd, t):
     """Memory target (:func:`memory_target`) of joint ``name`` from the generalized state, m/s."""
     pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
     return memory_target(pin - hole, pin_vel - hole_vel, getattr(mech, f"joint_{name}").clearance)
@@ -198,7 +197,7 @@ def joint_contact(mech: Mechanism, joint: Joint, pin_material: Material, hole_ma
     f_n, f_el = laws.normal_force(c.law, delta, delta_dot, approach, c.restitution, **geometry)
     fr = mech.friction
     f_t = laws.friction_force(fr.law, v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
-    # Only the relaxation part here; evaluate() adds d(delta_dot)/dt while separated.
+    # Only the relaxation part here; evaluate() adds the target's time derivative.
     target = memory_target(d, v_rel, joint.clearance)
     tracking = memory_tracking(delta, c.freeze_width)
     memory_rate = tracking * (target - memory) / c.memory_time
@@ -311,11 +310,11 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
         # derivative of the penetration rates along the motion), so at impact
         # onset it equals the approach speed without lag; the relaxation term in
         # memory_rate only erases the offset left by the previous rebound.
-        def rates(s_, sd_, t_):
-            return jnp.stack([penetration_rate(mech, name, s_, sd_, t_) for name in joints])
+        def targets(s_, sd_, t_):
+            return jnp.stack([state_memory_target(mech, name, s_, sd_, t_) for name in joints])
 
-        _, rate_dot = jax.jvp(rates, (s, sd, t), (sd, sdd, one))
-        memory_rates = [r + contacts[name].memory_tracking * rd for r, rd, name in zip(memory_rates, rate_dot, joints)]
+        _, target_dot = jax.jvp(targets, (s, sd, t), (sd, sdd, one))
+        memory_rates = [r + contacts[name].memory_tracking * td for r, td, name in zip(memory_rates, target_dot, joints)]
 
     residual = mass * qdd - applied
     react_b, react_c = ideal.reactions(mech, q, residual, mech.joint_B.ideal, mech.joint_C.ideal)

@@ -128,3 +128,19 @@ def energy_balance(cols: dict[str, np.ndarray], i0=0, i1=-1) -> dict[str, float]
     w_diss = float(cols["dissipated_work"][i1] - cols["dissipated_work"][i0])
     return {"energy_change_J": d_energy, "driver_work_J": w_drive, "dissipated_work_J": w_diss,
             "residual_J": d_energy - (w_drive - w_diss)}
+
+
+def deviation_bounds(mech, max_penetration) -> dict[str, float]:
+    """Largest |x deviation| of slider and rod centre that the loop closure allows, m.
+
+    Closure: ``dx3 = -d_Bx + d_Cx + L2 (cos theta2 - cos theta2_ideal)`` with
+    ``L2 (sin theta2 - sin theta2_ideal) = d_By - d_Cy``, so with
+    ``|d| <= c + max_penetration`` at each joint (play = sum of both):
+    ``|dx3| <= play / cos(theta2_max)`` and ``|dx2| <= play / 2 + tan(theta2_max) play / 2``,
+    where ``sin theta2_max = (L1 + |e|) / L2``. (The clearances alone are not a bound:
+    the rod-angle change adds up to tan(theta2) times the y play.)
+    """
+    play = float(mech.joint_B.clearance + mech.joint_C.clearance) + 2.0 * float(max_penetration)
+    th2max = math.asin((float(mech.crank_length) + abs(float(mech.offset))) / float(mech.rod_length))
+    return {"slider_x_m": play / math.cos(th2max), "rod_x_m": play / 2.0 + math.tan(th2max) * play / 2.0}
+
