@@ -1,4 +1,5 @@
-"""Command line: ``jaxcrank simulate [--config FILE] [--out DIR] [overrides]``."""
+"""Command line: ``jaxcrank simulate [--config FILE] [--out DIR] [overrides]`` and
+``jaxcrank optimize`` (:mod:`optim.cli`)."""
 
 from __future__ import annotations
 
@@ -117,11 +118,16 @@ def main(argv=None) -> int:
     parser.add_argument("--version", action="version", version=f"jaxcrank {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _simulate_parser(sub)
+    from optim import cli as optim_cli
+
+    optim_cli.add_parser(sub)
     args = parser.parse_args(argv)
     try:
         if args.command == "simulate":
             return run_simulate(args)
-    except (ParameterError, SimulationError) as err:
+        if args.command == "optimize":
+            return optim_cli.run(args)
+    except (ParameterError, SimulationError, FileNotFoundError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)
         return 2
     return 1

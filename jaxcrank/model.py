@@ -121,6 +121,44 @@ def joint_points(mech: Mechanism, name: str, s, sd, t):
     return pin, jnp.stack([qd[3], jnp.zeros_like(qd[3])]), q[:2] + half, qd[:2] + half_dot
 
 
+def eccentricities(mech: Mechanism, t, y):
+    """Pin-in-bearing state of a run with clearance at B and C: eccentricities
+    d = pin centre - hole centre, shape (2, 2) for (B, C), m, and their rates, m/s."""
+    if clearance_joints(mech) != ("B", "C"):
+        raise ValueError("eccentricities() needs clearance at both B and C")
+    phys = y * state_scales(mech)
+    s, sd = phys[:4], phys[4:8]
+    d, dd = [], []
+    for name in ("B", "C"):
+        pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
+        d.append(pin - hole)
+        dd.append(pin_vel - hole_vel)
+    return jnp.stack(d), jnp.stack(dd)
+
+
+def state_from_eccentricities(mech: Mechanism, t, d, d_rate, rest):
+    """Inverse of :func:`eccentricities`: the scaled state whose pins sit at
+    eccentricities ``d`` (2, 2) m moving at ``d_rate`` (2, 2) m/s in bearings B and
+    C at time t; ``rest`` are the remaining scaled state entries (memories, works).
+    Used to carry a pin-in-bearing state over to another design."""
+    if clearance_joints(mech) != ("B", "C"):
+        raise ValueError("state_from_eccentricities() needs clearance at both B and C")
+    t = jnp.asarray(t, dtype=float)
+
+    def positions(d_, t_):
+        a = ideal.crank_pin(mech, t_)
+        hole_b = a - d_[0]
+        sin2 = (mech.offset - d_[1, 1] - hole_b[1]) / mech.rod_length
+        th2 = jnp.arcsin(sin2)
+        u = jnp.stack([jnp.cos(th2), sin2])
+        x3 = hole_b[0] + mech.rod_length * u[0] + d_[1, 0]
+        centre = hole_b + 0.5 * mech.rod_length * u
+        return jnp.stack([centre[0], centre[1], th2, x3]) - ideal.positions(mech, t_)
+
+    s, sd = jax.jvp(positions, (d, t), (d_rate, jnp.ones_like(t)))
+    return jnp.concatenate([jnp.concatenate([s, sd]) / state_scales(mech)[:8], rest])
+
+
 def memory_target(eccentricity, relative_velocity, clearance):
     """The normal speed the approach-speed memory tracks, m/s.
 

@@ -75,10 +75,11 @@ def _controller(solver, rtol, atol):
 
 
 @eqx.filter_jit
-def _solve(mech, ts, solver, controller, dt0, max_steps, adjoint, progress_meter):
+def _solve(mech, ts, y0, solver, controller, dt0, max_steps, adjoint, progress_meter):
     term = diffrax.ODETerm(model.vector_field)
+    y0 = model.initial_state(mech) if y0 is None else y0
     sol = diffrax.diffeqsolve(
-        term, solver, ts[0], ts[-1], dt0, model.initial_state(mech), args=mech,
+        term, solver, ts[0], ts[-1], dt0, y0, args=mech,
         saveat=diffrax.SaveAt(ts=ts), stepsize_controller=controller, adjoint=adjoint,
         max_steps=max_steps, throw=False, progress_meter=progress_meter,
     )
@@ -95,17 +96,19 @@ def sample_times(mech: Mechanism, t1=None, n_samples=None, t0=0.0):
     return jnp.linspace(t0, t1, n_samples)
 
 
-def simulate(mech: Mechanism, t1=None, *, ts=None, n_samples=None, solver=DEFAULT_SOLVER,
+def simulate(mech: Mechanism, t1=None, *, ts=None, n_samples=None, y0=None, solver=DEFAULT_SOLVER,
              rtol=1e-6, atol=1e-6, dt0=1e-6, max_steps=500_000, adjoint=None,
              progress=False, throw=True) -> Simulation:
     """Simulate the clearance mechanism from pins-centred rest relative to the
-    ideal motion.
+    ideal motion (or from ``y0``).
 
     Args:
         mech: the mechanism.
         t1: end time, s (default four revolutions). Ignored when ``ts`` is given.
         ts: sample times, s, increasing, starting at the initial time.
         n_samples: number of equally spaced samples (default one per 0.1 deg of crank).
+        y0: scaled state at ``ts[0]`` (default :func:`jaxcrank.model.initial_state`,
+            pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.
         solver: a name in ``SOLVERS`` or a diffrax solver instance.
         rtol, atol: error tolerances on the dimensionless state.
         dt0: initial step, s.
@@ -128,7 +131,7 @@ def simulate(mech: Mechanism, t1=None, *, ts=None, n_samples=None, solver=DEFAUL
     controller = _controller(solver, rtol, atol)
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
     meter = diffrax.TqdmProgressMeter(refresh_steps=5000) if progress else diffrax.NoProgressMeter()
-    sim = _solve(mech, ts, solver, controller, dt0, max_steps, adjoint, meter)
+    sim = _solve(mech, ts, y0, solver, controller, dt0, max_steps, adjoint, meter)
     if throw:
         sim = check(sim, max_steps=max_steps)
     return sim
@@ -138,10 +141,10 @@ def check(sim: Simulation, max_steps=None) -> Simulation:
     """Raise :class:`SimulationError` with advice if ``sim`` failed or is not finite."""
     finite = jnp.all(jnp.isfinite(sim.ys))
     if isinstance(finite, jax.core.Tracer):  # inside jit/grad/vmap: fail at run time
-        ys = eqx.error_if(sim.ys, jnp.invert(finite), "jaxcrank: the solve produced non-finite values")
-        ys = eqx.error_if(ys, sim.result != diffrax.RESULTS.successful,
+        ys = eqx.error_if(sim.ys, sim.result != diffrax.RESULTS.successful,
                           "jaxcrank: the solve did not finish (step budget or step size); "
                           "raise max_steps, loosen rtol/atol or use a smoother friction law")
+        ys = eqx.error_if(ys, jnp.invert(finite), "jaxcrank: the solve produced non-finite values")
         return eqx.tree_at(lambda s: s.ys, sim, ys)
     if sim.result == diffrax.RESULTS.max_steps_reached:
         raise SimulationError(

@@ -1,0 +1,219 @@
+"""optax optimisation of a :class:`~optim.problem.Problem`, with a checkpoint
+after every iteration.
+
+The optimiser works on the scaled design ``u`` in the unit box and on the
+objective divided by its value at the start, so step sizes mean the same for any
+problem. Feasibility:
+
+- ``adam``: projected gradient steps, ``u <- P(u + adam_update)`` with
+  :meth:`Problem.project` (optax projections).
+- ``lbfgs``: ``optax.lbfgs`` with its zoom line search on the objective extended
+  beyond the feasible set by ``f(P(u)) + penalty * |u - P(u)|^2`` (continuous,
+  equal to f inside), and the iterate projected after each step (a no-op when
+  the line search stays inside).
+
+Convergence: the projected-gradient step ``|P(u - g) - u|_inf`` (g the scaled
+gradient) below ``gtol``, or the design moving less than ``xtol`` (scaled) for
+``patience`` consecutive iterations, or ``max_iterations``.
+
+Checkpoint: ``checkpoint.npz`` (iterate, optimiser state, history; replaced
+atomically) and ``history.csv`` are rewritten after every iteration; ``resume=True`` continues from the last finished
+iteration, so a killed run loses at most the iteration in progress and, being
+deterministic, reproduces the uninterrupted history.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from tqdm.auto import tqdm
+
+from .problem import Problem
+
+METHODS = ("adam", "lbfgs")
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Optimiser settings (scaled units: the design in [0, 1]^n, the objective / its start value).
+
+    Attributes:
+        method: ``"adam"`` or ``"lbfgs"``.
+        max_iterations: iteration budget.
+        learning_rate: Adam step size (scaled design units per iteration).
+        gtol: stop when the projected-gradient step is below this.
+        xtol: stop when the design moves less than this ``patience`` times in a row.
+        penalty: L-BFGS's out-of-set penalty weight.
+        max_linesearch_steps: L-BFGS line-search budget per iteration.
+    """
+
+    method: str = "adam"
+    max_iterations: int = 30
+    learning_rate: float = 0.1
+    gtol: float = 1e-3
+    xtol: float = 1e-3
+    patience: int = 3
+    penalty: float = 10.0
+    max_linesearch_steps: int = 6
+
+    def __post_init__(self):
+        from jaxcrank.params import ParameterError
+
+        if self.method not in METHODS:
+            raise ParameterError(f"optimiser method {self.method!r} is unknown; valid: {', '.join(METHODS)}")
+        if self.max_iterations < 1 or self.learning_rate <= 0 or self.gtol < 0 or self.xtol < 0:
+            raise ParameterError("max_iterations must be >= 1, learning_rate > 0, gtol and xtol >= 0")
+
+
+def _optimizer(settings: Settings):
+    if settings.method == "adam":
+        return optax.adam(settings.learning_rate)
+    return optax.lbfgs(linesearch=optax.scale_by_zoom_linesearch(
+        max_linesearch_steps=settings.max_linesearch_steps, initial_guess_strategy="one"))
+
+
+class _Scaled:
+    """The problem's objective on the scaled design, divided by ``f0``."""
+
+    def __init__(self, problem: Problem, f0: float, penalty: float):
+        self.problem, self.f0, self.penalty = problem, f0, penalty
+        self.value_and_grad = jax.jit(jax.value_and_grad(self.inside))
+        self.extended = jax.jit(self.outside)
+
+    def inside(self, u):
+        return self.problem.objective_value(self.problem.from_unit(u)) / self.f0
+
+    def outside(self, u):
+        p = self.problem.project(u)
+        return self.inside(p) + self.penalty * jnp.sum((u - p) ** 2)
+
+
+def _flatten(state):
+    leaves = jax.tree.leaves(state)
+    return {f"leaf{i}": np.asarray(x) for i, x in enumerate(leaves)}
+
+
+def _unflatten(template, arrays):
+    leaves, treedef = jax.tree.flatten(template)
+    return jax.tree.unflatten(treedef, [jnp.asarray(arrays[f"leaf{i}"], dtype=np.asarray(x).dtype)
+                                        for i, x in enumerate(leaves)])
+
+
+def history_columns(problem: Problem):
+    return (["iteration", "objective_deg", "rms_error_deg", "cost_deg"]
+            + [f"grad_{n}_deg_per_SI" for n in problem.names]
+            + [f"{n}_SI" for n in problem.names]
+            + ["projected_gradient", "step", "seconds"])
+
+
+def _write_history(path: Path, problem: Problem, history):
+    cols = history_columns(problem)
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        for h in history:
+            w.writerow({c: h[c] for c in cols})
+
+
+def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None = None, resume: bool = False,
+             progress: bool = True, stop_after: int | None = None) -> dict:
+    """Minimise ``problem`` from its start design.
+
+    Args:
+        out: run directory for ``checkpoint.npz`` and ``history.csv`` (no checkpoints when None).
+        resume: continue from ``out``'s checkpoint (error if there is none).
+        stop_after: stop (as if killed) after this many iterations of this call (tests).
+
+    Returns a dict: ``history`` (one dict per iteration, columns of
+    :func:`history_columns`), ``converged`` (reason or None), ``final`` (SI design),
+    ``final_objective`` (degrees).
+    """
+    opt = _optimizer(settings)
+    ckpt = None if out is None else Path(out) / "checkpoint.npz"
+    if resume:
+        if ckpt is None or not ckpt.exists():
+            raise FileNotFoundError(f"--resume: no checkpoint at {ckpt}; run without --resume first")
+        u, leaves, meta = load_checkpoint(Path(out))
+        if meta["names"] != list(problem.names) or meta["method"] != settings.method:
+            raise ValueError(f"--resume: checkpoint in {out} is for {meta['names']} with {meta['method']}, "
+                             f"not {list(problem.names)} with {settings.method}")
+        f0, history = meta["f0"], meta["history"]
+        state = _unflatten(opt.init(u), leaves)
+        quiet, converged = meta["quiet"], meta["converged"]
+    else:
+        u = problem.start_unit()
+        f0 = float(problem.objective_value(problem.from_unit(u), method="pathwise"))
+        state, history, quiet, converged = opt.init(u), [], 0, None
+    scaled = _Scaled(problem, f0, settings.penalty)
+
+    done_here = 0
+    start_it = len(history)
+    bar = tqdm(total=settings.max_iterations, initial=start_it, desc=f"{settings.method}", unit="it",
+               disable=not progress)
+    while converged is None and len(history) < settings.max_iterations:
+        tic = time.perf_counter()
+        value, grad = scaled.value_and_grad(u)
+        x = problem.from_unit(u)
+        proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
+        if settings.method == "adam":
+            updates, state = opt.update(grad, state, u)
+        else:
+            updates, state = opt.update(grad, state, u, value=value, grad=grad, value_fn=scaled.extended)
+        u_new = problem.project(optax.apply_updates(u, updates))
+        step = float(jnp.max(jnp.abs(u_new - u)))
+        cost = float(problem.cost(x))
+        grad_si = np.asarray(grad) * f0 / np.asarray(problem.span)
+        rec = {"iteration": len(history), "objective_deg": float(value) * f0,
+               "rms_error_deg": float(value) * f0 - cost, "cost_deg": cost,
+               **{f"grad_{n}_deg_per_SI": float(g) for n, g in zip(problem.names, grad_si)},
+               **{f"{n}_SI": float(v) for n, v in zip(problem.names, np.asarray(x))},
+               "projected_gradient": proj_step, "step": step, "seconds": time.perf_counter() - tic}
+        history.append(rec)
+        quiet = quiet + 1 if step < settings.xtol else 0
+        if proj_step < settings.gtol:
+            converged = f"projected gradient {proj_step:.2e} < gtol {settings.gtol:g}"
+        elif quiet >= settings.patience:
+            converged = f"design moved < xtol {settings.xtol:g} for {settings.patience} iterations"
+        else:
+            u = u_new
+        bar.update(1)
+        bar.set_postfix(objective=f"{rec['objective_deg']:.5f}", step=f"{step:.3g}")
+        if out is not None:
+            _checkpoint(Path(out), problem, settings, u, state, history, f0, quiet, converged)
+        done_here += 1
+        if stop_after is not None and done_here >= stop_after:
+            break
+    bar.close()
+    best = min(history, key=lambda h: h["objective_deg"])
+    return {"history": history, "converged": converged, "f0": f0,
+            "final": [best[f"{n}_SI"] for n in problem.names], "final_objective": best["objective_deg"],
+            "last": [history[-1][f"{n}_SI"] for n in problem.names]}
+
+
+def _checkpoint(out: Path, problem, settings, u, state, history, f0, quiet, converged):
+    """One atomic file holds everything a resume needs; history.csv is a copy for people."""
+    out.mkdir(parents=True, exist_ok=True)
+    meta = {"names": list(problem.names), "method": settings.method, "f0": f0, "quiet": quiet,
+            "converged": converged, "history": history}
+    arrays = {"u": np.asarray(u), "meta": np.asarray(json.dumps(meta)),
+              **{f"state_{k}": v for k, v in _flatten(state).items()}}
+    tmp = out / "checkpoint.tmp.npz"
+    np.savez(tmp, **arrays)
+    tmp.replace(out / "checkpoint.npz")
+    _write_history(out / "history.csv", problem, history)
+
+
+def load_checkpoint(out: Path):
+    """(u, optimiser-state leaves, meta dict) from ``out/checkpoint.npz``."""
+    arrays = np.load(Path(out) / "checkpoint.npz")
+    meta = json.loads(str(arrays["meta"]))
+    leaves = {k[6:]: arrays[k] for k in arrays.files if k.startswith("state_")}
+    return jnp.asarray(arrays["u"]), leaves, meta

@@ -1,0 +1,100 @@
+"""Figures of the optimisation: 1-D scans, the iteration history (paper Fig. 11)
+and the objective landscape with the optimiser's path."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+UNIT = {"crank_length": ("L1", 1e3, "mm"), "rod_length": ("L2", 1e3, "mm"), "offset": ("e", 1e3, "mm"),
+        "clearance_B": ("c_B", 1e3, "mm"), "clearance_C": ("c_C", 1e3, "mm")}
+
+
+def label(name):
+    short, _, unit = UNIT.get(name, (name, 1.0, "SI"))
+    return f"{short} [{unit}]"
+
+
+def factor(name):
+    return UNIT.get(name, (name, 1.0, ""))[1]
+
+
+def plot_scans(csv_path: Path, report: dict, png: Path):
+    with open(csv_path) as f:
+        rows = list(csv.DictReader(f))
+    names = report["names"]
+    fig, axes = plt.subplots(len(names), 2, figsize=(11, 3.6 * len(names)), squeeze=False)
+    for i, name in enumerate(names):
+        e = report["variables"][name]
+        k = factor(name)
+        x0 = report["start"][i]
+        f0 = None
+        for j, kinds in enumerate((("coarse",), ("fine", "micro"))):
+            ax = axes[i, j]
+            for kind, style in zip(kinds, ("o-", "s")):
+                sel = [r for r in rows if r["variable"] == name and r["kind"] == kind]
+                x = np.array([float(r[f"{name}_SI"]) for r in sel])
+                y = np.array([float(r["objective_deg"]) for r in sel])
+                ax.plot(x * k, y, style, ms=3, lw=0.8, label=f"{kind} scan")
+                if kind in ("fine", "micro") and f0 is None:
+                    mid = np.argmin(np.abs(x - x0))
+                    f0 = y[mid]
+            xs = np.array(ax.get_xlim()) / k
+            span = xs - x0
+            ref = f0 if f0 is not None else np.nan
+            ax.plot(xs * k, ref + e["fine_slope"] * span, "k--", lw=1,
+                    label=f"LS slope over fine scan {e['fine_slope']:+.3g} deg/SI")
+            ax.plot(xs * k, ref + e["ensemble_gradient"] * span, "r-", lw=1,
+                    label=f"ensemble gradient {e['ensemble_gradient']:+.3g} deg/SI")
+            ax.set_xlabel(label(name))
+            ax.set_ylabel("RMS transmission-angle error [deg]")
+            ax.legend(fontsize=7)
+            ax.grid(alpha=0.3)
+        axes[i, 0].set_title(f"{name}: across the box")
+        axes[i, 1].set_title(f"{name}: near the start (micro: 20 um steps)")
+    fig.suptitle(report["problem"])
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def plot_history(history: list[dict], png: Path, title=""):
+    """Objective per iteration (the paper's Fig. 11)."""
+    it = [h["iteration"] for h in history]
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(it, [h["objective_deg"] for h in history], "o-")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("objective [deg]")
+    ax.set_title(title or "optimisation history")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def plot_landscape(grid, names, path_xs, png: Path, title=""):
+    """Objective over a two-variable grid with the optimiser's path on it."""
+    k0, k1 = factor(names[0]), factor(names[1])
+    fig, ax = plt.subplots(figsize=(6.5, 5))
+    X, Y = np.meshgrid(grid.axes[0] * k0, grid.axes[1] * k1, indexing="ij")
+    cs = ax.contourf(X, Y, np.ma.masked_invalid(grid.values), levels=20, cmap="viridis")
+    fig.colorbar(cs, ax=ax, label="objective [deg]")
+    if path_xs is not None and len(path_xs):
+        p = np.asarray(path_xs)
+        ax.plot(p[:, 0] * k0, p[:, 1] * k1, "w.-", lw=1.2, label="optimiser path")
+        ax.plot(p[0, 0] * k0, p[0, 1] * k1, "wo", ms=7, label="start")
+        ax.plot(p[-1, 0] * k0, p[-1, 1] * k1, "r*", ms=12, label="final")
+    ax.plot(grid.best[0] * k0, grid.best[1] * k1, "kx", ms=10, mew=2, label="grid best")
+    ax.set_xlabel(label(names[0]))
+    ax.set_ylabel(label(names[1]))
+    ax.set_title(title or "objective landscape")
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)

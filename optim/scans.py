@@ -1,0 +1,142 @@
+"""1-D scans of the Eq. 19 objective along each design variable, and the
+gradients measured against them (issue 3's evidence for the gradient formulation).
+
+    python -m optim.scans --out runs/scans            # paper problem, ~10 min on 2 cores
+    python -m optim.scans --out runs/scans --quick    # short window, coarse, ~2 min
+
+Per variable, through the start design (other variables fixed):
+- ``coarse``: ``--points`` designs across the whole box;
+- ``fine``: ``--fine-points`` designs over +-``--half-width`` (default +-2 mm), whose
+  least-squares slope is the local trend;
+- ``micro``: 11 designs 20 um apart, whose neighbour differences show the jitter
+  a finite difference at that step would see.
+At the start design: the ensemble gradient (the optimiser's) and, for contrast, the
+pathwise reverse-mode gradient of the same objective.
+
+Writes ``scans.csv`` (variable, kind, design, objective in degrees),
+``scans.json`` (slopes and gradients, deg per SI unit) and ``scans.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import search
+from .objective import Objective
+from .problem import PROBLEMS, Problem
+
+
+def least_squares_slope(x, y):
+    """Slope of the least-squares line through (x, y), ignoring NaNs."""
+    x, y = np.asarray(x), np.asarray(y)
+    keep = np.isfinite(y)
+    return float(np.polyfit(x[keep], y[keep], 1)[0])
+
+
+def line(problem: Problem, x0, i, offsets):
+    xs = np.repeat(np.asarray(x0, dtype=float)[None], len(offsets), axis=0)
+    xs[:, i] += offsets
+    return xs
+
+
+def gradient(problem: Problem, x0, method: str):
+    """d objective / d x (deg per SI unit) at SI design x0 with ``method``."""
+    obj = dataclasses.replace(problem.objective, method=method)
+    prob = dataclasses.replace(problem, objective=obj)
+    return np.asarray(jax.jit(jax.grad(prob.objective_value))(jnp.asarray(x0, dtype=float)))
+
+
+def local_slopes(problem: Problem, x0, half_width: float, points: int, progress=False):
+    """Least-squares slope of the objective over x0 +- half_width along each
+    variable (deg per SI unit), and the scan values, shape (n, points)."""
+    offsets = np.linspace(-half_width, half_width, points)
+    xs = np.concatenate([line(problem, x0, i, offsets) for i in range(problem.n)])
+    values, _ = search.evaluate(problem, xs, chunk=points, progress=progress)
+    values = values.reshape(problem.n, points)
+    return np.array([least_squares_slope(offsets, v) for v in values]), values
+
+
+def run(problem: Problem, out: Path, points=21, fine_points=41, half_width=2e-3, micro_step=2e-5,
+        pathwise_gradient=True, progress=True):
+    out.mkdir(parents=True, exist_ok=True)
+    x0 = np.asarray(problem.from_unit(problem.start_unit()))
+    rows, report = [], {"problem": problem.title, "start": x0.tolist(), "names": list(problem.names),
+                        "objective": dataclasses.asdict(problem.objective), "variables": {}}
+    tic = time.perf_counter()
+    for i, name in enumerate(problem.names):
+        lo, hi = problem.lower[i], problem.upper[i]
+        kinds = {
+            "coarse": np.linspace(lo, hi, points) - x0[i],
+            "fine": np.linspace(-half_width, half_width, fine_points),
+            "micro": micro_step * np.arange(-5, 6),
+        }
+        entry = {}
+        for kind, offsets in kinds.items():
+            xs = line(problem, x0, i, offsets)
+            values, ok = search.evaluate(problem, xs, chunk=len(xs), progress=progress)
+            rows += [(name, kind, *x, v) for x, v in zip(xs, values)]
+            entry[f"{kind}_slope"] = least_squares_slope(xs[:, i], values)
+            if kind == "micro":
+                fd = np.diff(values) / micro_step
+                entry["micro_fd_slopes"] = [float(v) for v in fd]
+                entry["micro_relative_jitter"] = float(np.nanstd(values - np.polyval(
+                    np.polyfit(xs[:, i], values, 1), xs[:, i])) / np.nanmean(values))
+        report["variables"][name] = entry
+    report["scan_seconds"] = time.perf_counter() - tic
+
+    tic = time.perf_counter()
+    g = gradient(problem, x0, "ensemble")
+    report["ensemble_gradient"] = g.tolist()
+    report["ensemble_gradient_seconds"] = time.perf_counter() - tic
+    if pathwise_gradient:
+        tic = time.perf_counter()
+        report["pathwise_gradient"] = gradient(problem, x0, "pathwise").tolist()
+        report["pathwise_gradient_seconds"] = time.perf_counter() - tic
+    for i, name in enumerate(problem.names):
+        e = report["variables"][name]
+        e["ensemble_gradient"] = float(g[i])
+        e["ensemble_over_fine_slope"] = float(g[i] / e["fine_slope"])
+
+    with open(out / "scans.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["variable", "kind", *[f"{n}_SI" for n in problem.names], "objective_deg"])
+        w.writerows(rows)
+    (out / "scans.json").write_text(json.dumps(report, indent=2))
+    from .plots import plot_scans
+    plot_scans(out / "scans.csv", report, out / "scans.png")
+    return report
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m optim.scans", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--problem", choices=sorted(PROBLEMS), default="paper")
+    ap.add_argument("--out", type=Path, default=Path("runs/scans"))
+    ap.add_argument("--points", type=int, default=21)
+    ap.add_argument("--fine-points", type=int, default=41)
+    ap.add_argument("--half-width", type=float, default=2e-3, help="fine scan half width, SI (default 2 mm)")
+    ap.add_argument("--quick", action="store_true", help="window (0.1, 0.12] s and fewer points (smoke run)")
+    ap.add_argument("--no-pathwise", action="store_true", help="skip the (expensive, exploding) pathwise gradient")
+    args = ap.parse_args(argv)
+    obj = Objective(t_end=0.12) if args.quick else Objective()
+    problem = PROBLEMS[args.problem](objective=obj)
+    pts, fine = (7, 11) if args.quick else (args.points, args.fine_points)
+    report = run(problem, args.out, pts, fine, args.half_width, pathwise_gradient=not args.no_pathwise)
+    for name, e in report["variables"].items():
+        print(f"{name}: fine LS slope {e['fine_slope']:+.4g}, ensemble gradient {e['ensemble_gradient']:+.4g} "
+              f"(ratio {e['ensemble_over_fine_slope']:.3f}), coarse slope {e['coarse_slope']:+.4g}, "
+              f"micro FD slopes {min(e['micro_fd_slopes']):+.3g} .. {max(e['micro_fd_slopes']):+.3g} deg/SI")
+    if "pathwise_gradient" in report:
+        print("pathwise gradient:", report["pathwise_gradient"])
+
+
+if __name__ == "__main__":
+    main()
