@@ -27,7 +27,6 @@ Config TOML (every key optional)::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import time
