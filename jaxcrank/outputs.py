@@ -75,15 +75,23 @@ def trajectory(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(cols[k]) for k in COLUMNS}
 
 
+def transmission_angle_error(mech, ts, ys):
+    """Actual minus ideal transmission angle at sample times ``ts`` (s) with scaled
+    states ``ys``, degrees; compared at the same time, i.e. the same crank angle."""
+    def one(t, y):
+        actual = model.evaluate(mech, t, y).q[2]
+        return ideal.transmission_angle(actual) - ideal.transmission_angle(ideal.positions(mech, t)[2])
+
+    return jax.vmap(one)(ts, ys) * DEG
+
+
 def rms_transmission_error(sim: Simulation, t_start=None):
     """RMS of (actual - ideal) transmission angle over samples with t > t_start,
     degrees (paper Eq. 19; samples are at equal crank-angle steps when ``ts`` is
     equally spaced). Differentiable. Default ``t_start``: one crank revolution."""
     mech = sim.mechanism
     t_start = 2.0 * math.pi / mech.crank_speed if t_start is None else t_start
-    q = jax.vmap(lambda t, y: model.evaluate(mech, t, y).q)(sim.ts, sim.ys)
-    qi = jax.vmap(lambda t: ideal.positions(mech, t))(sim.ts)
-    err = (ideal.transmission_angle(q[:, 2]) - ideal.transmission_angle(qi[:, 2])) * DEG
+    err = transmission_angle_error(mech, sim.ts, sim.ys)
     w = (sim.ts > t_start).astype(err.dtype)
     return jnp.sqrt(jnp.sum(w * err**2) / jnp.maximum(jnp.sum(w), 1.0))
 

@@ -35,11 +35,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from jaxcrank import ideal, laws, model
+from jaxcrank import laws, model
+from jaxcrank.outputs import transmission_angle_error
 from jaxcrank.params import Mechanism, ParameterError
 from jaxcrank.solve import simulate
-
-DEG = 180.0 / math.pi
 
 
 class Objective(eqx.Module):
@@ -61,7 +60,8 @@ class Objective(eqx.Module):
         window_solver: solver of the ensemble windows. An L-stable implicit solver:
             an explicit one's step sequence sits at its stability limit in stick
             phases (friction ramp) and the derivative of its discrete solution then
-            blows up in about 1 % of windows (README, "Gradients").
+            blows up in about 1 % of windows (README, "Design optimisation";
+            ``bench/window_gradients.py``).
         rtol, atol: solver tolerances on the scaled state.
         max_steps: step budget of the long solve.
     """
@@ -112,33 +112,28 @@ class Objective(eqx.Module):
         return n_start, n_eval, n_window, dt
 
 
-def transmission_error(mech: Mechanism, ts, ys):
-    """Actual minus ideal transmission angle at each sample, degrees."""
-    def one(t, y):
-        q = model.evaluate(mech, t, y).q
-        return ideal.transmission_angle(q[2]) - ideal.transmission_angle(ideal.positions(mech, t)[2])
-
-    return jax.vmap(one)(ts, ys) * DEG
+def _eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid):
+    """One solve from the pins-centred start over the objective's sample ``grid``
+    (:meth:`Objective.grid`, computed by the caller while the crank speed is still
+    concrete): the simulation, the sample index of t_start and the
+    transmission-angle errors (deg) at the samples in (t_start, t_end]."""
+    n_start, n_eval, _, dt = grid
+    ts = dt * jnp.arange(n_start + n_eval + 1)
+    sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=throw)
+    return sim, n_start, transmission_angle_error(mech, sim.ts[n_start + 1:], sim.ys[n_start + 1:])
 
 
 def pathwise_errors(mech: Mechanism, obj: Objective = Objective()):
     """Squared transmission-angle errors (deg^2) at the samples in (t_start, t_end]
     of one solve from the pins-centred start, and whether the solve succeeded
     (``throw=False``: batch callers report failures)."""
-    n_start, n_eval, _, dt = obj.grid(mech)
-    ts = dt * jnp.arange(n_start + n_eval + 1)
-    sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=False)
-    err = transmission_error(mech, sim.ts[n_start + 1:], sim.ys[n_start + 1:])
-    ok = sim.ok & jnp.all(jnp.isfinite(err))
-    return err**2, ok
+    sim, _, err = _eval_samples(mech, obj, False, obj.grid(mech))
+    return err**2, sim.ok & jnp.all(jnp.isfinite(err))
 
 
 def pathwise(mech: Mechanism, obj: Objective = Objective()):
     """Eq. 19 from one solve from the pins-centred start, degrees (raises if the solve fails)."""
-    n_start, n_eval, _, dt = obj.grid(mech)
-    ts = dt * jnp.arange(n_start + n_eval + 1)
-    sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps)
-    err = transmission_error(mech, sim.ts[n_start + 1:], sim.ys[n_start + 1:])
+    _, _, err = _eval_samples(mech, obj, True, obj.grid(mech))
     return jnp.sqrt(jnp.mean(err**2))
 
 
@@ -160,11 +155,10 @@ class Starts(NamedTuple):
 def reference(mech: Mechanism, obj: Objective = Objective()):
     """One forward solve from the pins-centred start (no gradient): the Eq. 19
     value (degrees) and the :class:`Starts` of the ensemble windows."""
-    n_start, n_eval, n_window, dt = obj.grid(mech)
+    grid = obj.grid(mech)
+    _, n_eval, n_window, _ = grid
     mech = jax.lax.stop_gradient(mech)
-    ts = dt * jnp.arange(n_start + n_eval + 1)
-    sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps)
-    err = transmission_error(mech, sim.ts[n_start + 1:], sim.ys[n_start + 1:])
+    sim, n_start, err = _eval_samples(mech, obj, True, grid)
     tiles = n_eval // n_window
     k = tiles if obj.windows <= 0 else min(obj.windows, tiles)
     idx = n_start + n_window * ((jnp.arange(k) * tiles) // k)  # k windows spread evenly
@@ -191,30 +185,27 @@ def _is_float(x):
     return isinstance(x, float) or (isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.inexact))
 
 
-def _window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, budget: int, obj: Objective):
+def _window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: Objective):
     ts = starts.t[i] + dt * jnp.arange(n_window + 1)
     sim = simulate(mech, ts=ts, y0=start_state(mech, starts, i), solver=obj.window_solver,
-                   rtol=obj.rtol, atol=obj.atol, max_steps=budget, throw=False)
+                   rtol=obj.rtol, atol=obj.atol, max_steps=obj.window_max_steps, throw=False)
     ok = sim.ok & jnp.all(jnp.isfinite(sim.ys))
     ys = jnp.where(ok, sim.ys, 0.0)  # a failed window is reported by ensemble(), not propagated as NaN
-    return jnp.sum(transmission_error(mech, sim.ts[1:], ys[1:]) ** 2), ok
+    return jnp.sum(transmission_angle_error(mech, sim.ts[1:], ys[1:]) ** 2), ok
 
 
 def window_gradients(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
     """Each window's sum of squared transmission-angle errors (deg^2), shape (K,),
     whether its solve succeeded (K,), and its gradient with respect to every
     parameter of ``mech`` (a Mechanism of (K,) arrays), each window re-solved from
-    :func:`start_state`.
-
-    The windows are one ``vmap`` of per-window reverse-mode gradients (per-window
-    values are also the diagnostics behind the README's tail statistics)."""
-    _, n_eval, n_window, dt = obj.grid(mech)
-    budget = obj.window_max_steps
+    :func:`start_state`. The windows are one ``vmap`` of per-window reverse-mode
+    gradients (``bench/window_gradients.py`` looks at their distribution)."""
+    _, _, n_window, dt = obj.grid(mech)
     params, static = eqx.partition(mech, _is_float)
     params = jax.tree.map(lambda x: jax.lax.stop_gradient(jnp.asarray(x)), params)
 
     def one(p, i):
-        return _window(eqx.combine(p, static), starts, i, n_window, dt, budget, obj)
+        return _window(eqx.combine(p, static), starts, i, n_window, dt, obj)
 
     (sq, ok), grads = jax.vmap(jax.value_and_grad(one, has_aux=True), in_axes=(None, 0))(
         params, jnp.arange(starts.t.shape[0]))
@@ -231,7 +222,7 @@ def ensemble(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
     n_ok = jnp.sum(ok)
     n_ok = eqx.error_if(n_ok, n_ok < 0.5 * ok.shape[0],
                         "jaxcrank: more than half of the ensemble windows failed; raise "
-                        "Objective.max_steps, loosen rtol/atol or shorten Objective.window")
+                        "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window")
     w = ok.astype(sq.dtype)
     # First-order surrogate: value sum(sq), gradient the sum of the window gradients.
     params, _ = eqx.partition(mech, _is_float)

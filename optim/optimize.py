@@ -133,8 +133,9 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
         stop_after: stop (as if killed) after this many iterations of this call (tests).
 
     Returns a dict: ``history`` (one dict per iteration, columns of
-    :func:`history_columns`), ``converged`` (reason or None), ``final`` (SI design),
-    ``final_objective`` (degrees).
+    :func:`history_columns`), ``converged`` (reason or None), ``f0`` (objective at the
+    start, degrees), ``final`` (the best SI design of the history), ``final_objective``
+    (its objective, degrees) and ``last`` (the last iterate, SI).
     """
     opt = _optimizer(settings)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"

@@ -25,6 +25,24 @@ from jaxcrank.params import Mechanism, ParameterError, paper, with_clearance
 from .objective import Objective, value
 
 
+def _leaf(mech: Mechanism, name: str):
+    """(getter, current value) of the numeric parameter at dotted path ``name``."""
+    def get(m):
+        for p in name.split("."):
+            m = getattr(m, p)
+        return m
+
+    try:
+        current = get(mech)
+    except AttributeError:
+        raise ParameterError(f"unknown design variable {name!r}: use a numeric Mechanism field such as "
+                             "'rod_length', a dotted path such as 'contact.restitution', or "
+                             "'clearance_B' / 'clearance_C'") from None
+    if isinstance(current, (str, bool, eqx.Module)):
+        raise ParameterError(f"design variable {name!r} is not a number")
+    return get, current
+
+
 def set_parameter(mech: Mechanism, name: str, x) -> Mechanism:
     """``mech`` with parameter ``name`` set to ``x`` (SI). Names are the
     mechanism's scalar fields (``crank_length``, ``rod_length``, ``offset``, ...),
@@ -34,37 +52,14 @@ def set_parameter(mech: Mechanism, name: str, x) -> Mechanism:
         return with_clearance(mech, clearance_B=x)
     if name == "clearance_C":
         return with_clearance(mech, clearance_C=x)
-    path = name.split(".")
-
-    def get(m):
-        for p in path:
-            m = getattr(m, p)
-        return m
-
-    try:
-        current = get(mech)
-    except AttributeError:
-        raise ParameterError(f"unknown design variable {name!r}: use a Mechanism field such as "
-                             "'rod_length', a dotted path such as 'contact.restitution', or "
-                             "'clearance_B' / 'clearance_C'") from None
-    if isinstance(current, (str, bool)) or isinstance(current, eqx.Module):
-        raise ParameterError(f"design variable {name!r} is not a number")
-    return eqx.tree_at(get, mech, x)
+    return eqx.tree_at(_leaf(mech, name)[0], mech, x)
 
 
 def get_parameter(mech: Mechanism, name: str) -> float:
     """Current value (SI) of a design variable name (see :func:`set_parameter`)."""
     if name in ("clearance_B", "clearance_C"):
         return float(getattr(mech, "joint_" + name[-1]).clearance)
-    m = mech
-    try:
-        for p in name.split("."):
-            m = getattr(m, p)
-        return float(m)
-    except (AttributeError, TypeError):
-        raise ParameterError(f"unknown design variable {name!r}: use a numeric Mechanism field such as "
-                             "'rod_length', a dotted path such as 'contact.restitution', or "
-                             "'clearance_B' / 'clearance_C'") from None
+    return float(_leaf(mech, name)[1])
 
 
 @dataclasses.dataclass(frozen=True)

@@ -42,7 +42,7 @@ def least_squares_slope(x, y):
     return float(np.polyfit(x[keep], y[keep], 1)[0])
 
 
-def line(problem: Problem, x0, i, offsets):
+def line(x0, i, offsets):
     xs = np.repeat(np.asarray(x0, dtype=float)[None], len(offsets), axis=0)
     xs[:, i] += offsets
     return xs
@@ -59,7 +59,7 @@ def local_slopes(problem: Problem, x0, half_width: float, points: int, progress=
     """Least-squares slope of the objective over x0 +- half_width along each
     variable (deg per SI unit), and the scan values, shape (n, points)."""
     offsets = np.linspace(-half_width, half_width, points)
-    xs = np.concatenate([line(problem, x0, i, offsets) for i in range(problem.n)])
+    xs = np.concatenate([line(x0, i, offsets) for i in range(problem.n)])
     values, _ = search.evaluate(problem, xs, chunk=points, progress=progress)
     values = values.reshape(problem.n, points)
     return np.array([least_squares_slope(offsets, v) for v in values]), values
@@ -81,7 +81,7 @@ def run(problem: Problem, out: Path, points=21, fine_points=41, half_width=2e-3,
         }
         entry = {}
         for kind, offsets in kinds.items():
-            xs = line(problem, x0, i, offsets)
+            xs = line(x0, i, offsets)
             values, ok = search.evaluate(problem, xs, chunk=len(xs), progress=progress)
             rows += [(name, kind, *x, v) for x, v in zip(xs, values)]
             entry[f"{kind}_slope"] = least_squares_slope(xs[:, i], values)
