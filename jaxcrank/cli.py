@@ -1,10 +1,12 @@
-"""Command line: ``jaxcrank simulate [--config FILE] [--out DIR] [overrides]`` and
-``jaxcrank optimize`` (:mod:`optim.cli`)."""
+"""Command line: ``jaxcrank simulate [--config FILE] [--out DIR] [overrides]``,
+``jaxcrank sweep --spec FILE [--out DIR] [--resume]`` and ``jaxcrank optimize``
+(:mod:`optim.cli`)."""
 
 from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import platform
 import sys
@@ -103,6 +105,82 @@ def run_simulate(args) -> int:
     return 0
 
 
+SWEEP_SPEC_HELP = """\
+TOML spec (SI units; every key but [parameters] optional):
+
+  sampling = "grid"    # grid | lhs | random | oat | monte_carlo
+  samples = 64         # lhs, random, monte_carlo: number of designs
+  points = 11          # oat: points per line
+  seed = 0             # lhs, random, monte_carlo
+  chunk = 16           # designs per vmap batch (and per checkpoint)
+  metrics = ["max_abs_slider_x_deviation_m", "peak_contact_force_C_N"]  # plotted (all are computed)
+
+  [parameters.clearance_B]          # any parameter: clearance_B, rod_length, contact.restitution, ...
+  values = [1e-4, 2.5e-4, 5e-4]     # grid: explicit levels, or lower/upper/points
+  # lower = 1e-4  upper = 5e-4  points = 5     (grid, lhs, random, oat)
+  # nominal = 2.5e-4  tolerance = 5e-5  distribution = "uniform" | "normal" (+-3 sigma)  (monte_carlo)
+
+  [simulation]         # revolutions = 4, samples_per_revolution = 3600, metrics_from_revolution = 1,
+                       # solver = "tsit5", rtol = 1e-6, atol = 1e-6, max_steps = 500000
+  [mechanism]          # the base mechanism, as in `jaxcrank simulate`'s config.toml
+
+Several devices: every local device is used (CPU: JAX_NUM_CPU_DEVICES=N); several
+processes: see README, "Sweeps on a cluster".
+"""
+
+
+def _sweep_parser(sub):
+    p = sub.add_parser(
+        "sweep", help="simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo) with vmap",
+        description="Run a sweep over mechanism parameters and write table.csv (one row per design: "
+                    "parameters, status, headline metrics), summary.json and figures/ into --out.",
+        epilog=SWEEP_SPEC_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--spec", type=Path, required=True, help="sweep spec TOML (see below)")
+    p.add_argument("--out", type=Path, default=Path("runs/sweep"), help="output directory (default runs/sweep)")
+    p.add_argument("--resume", action="store_true", help="continue the sweep in --out where it stopped")
+    p.add_argument("--distributed", action="store_true",
+                   help="join a jax.distributed job first: under Slurm / Open MPI / Kubernetes the cluster "
+                        "is detected; otherwise give --coordinator, --num-processes and --process-id")
+    p.add_argument("--coordinator", metavar="HOST:PORT", help="address of process 0 (implies --distributed)")
+    p.add_argument("--num-processes", type=int, help="processes in the job (with --coordinator)")
+    p.add_argument("--process-id", type=int, help="this process's rank, 0 .. num-processes - 1 (with --coordinator)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def run_sweep(args) -> int:
+    import jax
+
+    from . import plots, sweep
+
+    if args.distributed or args.coordinator:
+        jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.num_processes,
+                                   process_id=args.process_id)
+    spec = sweep.load_spec(args.spec)
+    out = args.out
+    if jax.process_index() == 0:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "spec.toml").write_text(args.spec.read_text())
+    start = time.perf_counter()
+    table = sweep.run(spec.base, spec.names, spec.designs, spec.settings, out=out, resume=args.resume,
+                      chunk=spec.chunk, progress=not args.quiet)
+    wall = time.perf_counter() - start
+    if jax.process_index() != 0:
+        return 0
+    summary = sweep.summarize(table)
+    summary.update({"sampling": spec.sampling, "parameters": spec.names, "wall_time_s_this_call": wall,
+                    "devices": jax.device_count(), "processes": jax.process_count(),
+                    "settings": dataclasses.asdict(spec.settings), "versions": _versions(),
+                    "metric_meanings": sweep.METRICS})
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    param_cols = [f"{n}_{sweep.parameter_unit(n)}" for n in spec.names]
+    files = plots.sweep_figures(table, spec.sampling, param_cols, spec.metrics, out / "figures")
+    counts = summary["status_counts"]
+    print(f"wrote {out}/ (table.csv, summary.json, figures/: {len(files)} PNGs): {summary['designs']} designs, "
+          + ", ".join(f"{k} {v}" for k, v in counts.items() if v))
+    return 0
+
+
 def _versions():
     import diffrax
     import equinox
@@ -118,6 +196,7 @@ def main(argv=None) -> int:
     parser.add_argument("--version", action="version", version=f"jaxcrank {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _simulate_parser(sub)
+    _sweep_parser(sub)
     from optim import cli as optim_cli
 
     optim_cli.add_parser(sub)
@@ -125,6 +204,8 @@ def main(argv=None) -> int:
     try:
         if args.command == "simulate":
             return run_simulate(args)
+        if args.command == "sweep":
+            return run_sweep(args)
         if args.command == "optimize":
             return optim_cli.run(args)
     except (ParameterError, SimulationError, FileNotFoundError) as err:

@@ -16,6 +16,7 @@ checked there; they were checked when the concrete mechanism was built.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import equinox as eqx
@@ -308,3 +309,73 @@ def with_clearance(mech: Mechanism, clearance_B=None, clearance_C=None) -> Mecha
     if clearance_C is not None:
         mech = eqx.tree_at(lambda m: m.joint_C.pin_radius, mech, mech.joint_C.hole_radius - clearance_C)
     return mech
+
+
+def _leaf(mech: Mechanism, name: str):
+    """(getter, current value) of the numeric parameter at dotted path ``name``."""
+    def get(m):
+        for p in name.split("."):
+            m = getattr(m, p)
+        return m
+
+    try:
+        current = get(mech)
+    except AttributeError:
+        raise ParameterError(f"unknown design variable {name!r}: use a numeric Mechanism field such as "
+                             "'rod_length', a dotted path such as 'contact.restitution', or "
+                             "'clearance_B' / 'clearance_C'") from None
+    if isinstance(current, (str, bool, eqx.Module)):
+        raise ParameterError(f"design variable {name!r} is not a number")
+    return get, current
+
+
+def set_parameter(mech: Mechanism, name: str, x) -> Mechanism:
+    """``mech`` with parameter ``name`` set to ``x`` (SI). Names are the
+    mechanism's scalar fields (``crank_length``, ``rod_length``, ``offset``, ...),
+    dotted paths into its parts (``contact.restitution``) or ``clearance_B`` /
+    ``clearance_C`` (radial clearance, m: the pin shrinks, the hole stays)."""
+    if name == "clearance_B":
+        return with_clearance(mech, clearance_B=x)
+    if name == "clearance_C":
+        return with_clearance(mech, clearance_C=x)
+    return eqx.tree_at(_leaf(mech, name)[0], mech, x)
+
+
+def get_parameter(mech: Mechanism, name: str) -> float:
+    """Current value (SI) of a design variable name (see :func:`set_parameter`)."""
+    if name in ("clearance_B", "clearance_C"):
+        return float(getattr(mech, "joint_" + name[-1]).clearance)
+    return float(_leaf(mech, name)[1])
+
+
+_UNITS = {
+    "crank_length": "m", "rod_length": "m", "offset": "m", "crank_mass": "kg", "rod_mass": "kg",
+    "slider_mass": "kg", "crank_inertia": "kg_m2", "rod_inertia": "kg_m2", "slider_inertia": "kg_m2",
+    "crank_speed": "rad_s", "initial_crank_angle": "rad", "gravity": "m_s2", "hole_radius": "m",
+    "pin_radius": "m", "clearance_B": "m", "clearance_C": "m", "youngs_modulus": "Pa", "poisson_ratio": "1",
+    "restitution": "1", "exponent": "1", "min_approach_speed": "m_s", "memory_time": "s", "freeze_width": "m",
+    "coefficient": "1", "stick_speed": "m_s", "slip_speed": "m_s",
+}
+
+
+def parameter_unit(name: str) -> str:
+    """SI unit of a parameter name (as in :func:`set_parameter`), written for column
+    names: ``m``, ``kg``, ``kg_m2``, ``rad_s``, ``m_s``, ``m_s2``, ``Pa``, ``s``, ``rad`` or ``1``
+    (dimensionless)."""
+    get_parameter(Mechanism(), name)  # raises on unknown names
+    return _UNITS[name.rsplit(".", 1)[-1]]
+
+
+def float_parameter_names(mech: Mechanism | None = None) -> list[str]:
+    """Dotted names of every numeric parameter of ``mech`` (default: the paper preset),
+    the set :func:`set_parameter` accepts besides ``clearance_B`` / ``clearance_C``."""
+    mech = Mechanism() if mech is None else mech
+    names = []
+    for field in dataclasses.fields(mech):
+        value = getattr(mech, field.name)
+        if isinstance(value, eqx.Module):
+            names += [f"{field.name}.{f.name}" for f in dataclasses.fields(value)
+                      if not isinstance(getattr(value, f.name), (str, bool))]
+        elif not isinstance(value, (str, bool)):
+            names.append(field.name)
+    return names

@@ -4,10 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 import numpy as np  # noqa: E402
 
 
@@ -106,3 +103,87 @@ def save_figures(cols, clearances, directory) -> list[Path]:
         plt.close(fig)
         paths.append(path)
     return paths
+
+
+# ------------------------------------------------------------------ sweeps
+_UNIT_LABELS = {"_m_s2": "m/s^2", "_kg_m2": "kg m^2", "_rad_s": "rad/s", "_N_m": "N m", "_m_s": "m/s",
+                "_deg": "deg", "_Pa": "Pa", "_rad": "rad", "_kg": "kg", "_m": "m", "_N": "N", "_s": "s", "_1": "-"}
+
+
+def _label(col: str) -> str:
+    """``rod_length_m`` -> ``rod_length [m]`` (units from the column-name suffix)."""
+    for suf, unit in _UNIT_LABELS.items():
+        if col.endswith(suf):
+            return f"{col[:-len(suf)]} [{unit}]"
+    return col
+
+
+def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
+    """Figures of a sweep table (:func:`jaxcrank.sweep.read_table`) into ``out_dir``:
+    heat maps for two-parameter grids, metric-vs-parameter lines (mean and min-max
+    band over the other parameters) for grids and one-at-a-time lines, scatter plots
+    for LHS / random samples, histograms for Monte Carlo. Failed designs are drawn
+    as crosses on heat maps and left out elsewhere."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    ok = np.asarray(table["status"]) == "ok"
+    files = []
+
+    def save(fig, name):
+        fig.tight_layout()
+        fig.savefig(out_dir / name, dpi=120)
+        plt.close(fig)
+        files.append(out_dir / name)
+
+    if sampling == "grid" and len(param_cols) == 2:
+        a, b = (np.asarray(table[c]) for c in param_cols)
+        ua, ub = np.unique(a), np.unique(b)
+        for m in metrics:
+            z = np.full((len(ua), len(ub)), np.nan)
+            z[np.searchsorted(ua, a[ok]), np.searchsorted(ub, b[ok])] = np.asarray(table[m])[ok]
+            fig, ax = plt.subplots(figsize=(6, 4.8))
+            im = ax.pcolormesh(ub, ua, z, shading="nearest", cmap="viridis")
+            fig.colorbar(im, ax=ax, label=_label(m))
+            if (~ok).any():
+                ax.plot(b[~ok], a[~ok], "rx", label="failed / invalid")
+                ax.legend(fontsize=8)
+            ax.set_xlabel(_label(param_cols[1]))
+            ax.set_ylabel(_label(param_cols[0]))
+            ax.set_title(m)
+            save(fig, f"heatmap_{m}.png")
+    if sampling == "monte_carlo":
+        for m in metrics:
+            v = np.asarray(table[m])[ok]
+            fig, ax = plt.subplots(figsize=(6, 4))
+            ax.hist(v, bins=max(5, int(np.sqrt(max(len(v), 1)))), color="C0", alpha=0.8)
+            for q, ls in ((0.05, ":"), (0.5, "--"), (0.95, ":")):
+                if len(v):
+                    ax.axvline(np.quantile(v, q), color="k", ls=ls, lw=1)
+            ax.set_xlabel(_label(m))
+            ax.set_ylabel("parts")
+            ax.set_title(f"{m}: {len(v)} parts (5/50/95 % quantiles dashed)")
+            save(fig, f"histogram_{m}.png")
+        return files
+    for c in param_cols:
+        x = np.asarray(table[c])
+        fig, axes = plt.subplots(len(metrics), 1, figsize=(7, 2.2 * len(metrics)), sharex=True, squeeze=False)
+        for ax, m in zip(axes[:, 0], metrics):
+            y = np.asarray(table[m])
+            if sampling in ("lhs", "random"):
+                ax.plot(x[ok], y[ok], ".", ms=4)
+            else:
+                sel = ok & np.ones_like(ok)
+                if sampling == "oat":  # the line of this parameter: the others at their base value
+                    others = [o for o in param_cols if o != c]
+                    sel = ok & np.all([np.asarray(table[o]) == np.median(np.asarray(table[o])) for o in others], axis=0) \
+                        if others else ok
+                xs = np.unique(x[sel])
+                stats = [y[sel & (x == v)] for v in xs]
+                ax.plot(xs, [s.mean() for s in stats], "o-", ms=3)
+                ax.fill_between(xs, [s.min() for s in stats], [s.max() for s in stats], alpha=0.25)
+            ax.set_ylabel(_label(m), fontsize=7)
+        axes[-1, 0].set_xlabel(_label(c))
+        axes[0, 0].set_title(f"metrics vs {c}" + (" (band: min-max over the other parameters)"
+                                                   if sampling == "grid" and len(param_cols) > 1 else ""))
+        save(fig, f"lines_{_label(c).split(' [')[0]}.png")
+    return files

@@ -156,17 +156,23 @@ def reference(mech: Mechanism, obj: Objective = Objective()):
     """One forward solve from the pins-centred start (no gradient): the Eq. 19
     value (degrees) and the :class:`Starts` of the ensemble windows."""
     grid = obj.grid(mech)
-    _, n_eval, n_window, _ = grid
     mech = jax.lax.stop_gradient(mech)
     sim, n_start, err = _eval_samples(mech, obj, True, grid)
+    return jax.lax.stop_gradient(jnp.sqrt(jnp.mean(err**2))), window_starts(sim, n_start, grid, obj)
+
+
+def window_starts(sim, n_start: int, grid, obj: Objective) -> Starts:
+    """The :class:`Starts` of the ensemble windows of ``obj`` taken from a solve
+    ``sim`` over the objective's sample ``grid`` (no gradient)."""
+    _, n_eval, n_window, _ = grid
+    mech = jax.lax.stop_gradient(sim.mechanism)
     tiles = n_eval // n_window
     k = tiles if obj.windows <= 0 else min(obj.windows, tiles)
     idx = n_start + n_window * ((jnp.arange(k) * tiles) // k)  # k windows spread evenly
     t0s, y0s = sim.ts[idx], sim.ys[idx]
     d, d_rate = jax.vmap(model.eccentricities, in_axes=(None, 0, 0))(mech, t0s, y0s)
     clearance = jnp.stack([mech.joint_B.clearance, mech.joint_C.clearance])
-    starts = Starts(t0s, d, d_rate, y0s[:, 8:], clearance)
-    return jax.lax.stop_gradient(jnp.sqrt(jnp.mean(err**2))), jax.lax.stop_gradient(starts)
+    return jax.lax.stop_gradient(Starts(t0s, d, d_rate, y0s[:, 8:], clearance))
 
 
 def start_state(mech: Mechanism, starts: Starts, i):

@@ -6,10 +6,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
 import numpy as np  # noqa: E402
 
 UNIT = {"crank_length": ("L1", 1e3, "mm"), "rod_length": ("L2", 1e3, "mm"), "offset": ("e", 1e3, "mm"),
@@ -78,8 +75,9 @@ def plot_history(history: list[dict], png: Path, title=""):
     plt.close(fig)
 
 
-def plot_landscape(grid, names, path_xs, png: Path, title=""):
-    """Objective over a two-variable grid with the optimiser's path on it."""
+def plot_landscape(grid, names, path_xs, png: Path, title="", final=None):
+    """Objective over a two-variable grid with the optimiser's path on it; the star
+    marks ``final`` (the optimiser's best design; default the last iterate)."""
     k0, k1 = factor(names[0]), factor(names[1])
     fig, ax = plt.subplots(figsize=(6.5, 5))
     X, Y = np.meshgrid(grid.axes[0] * k0, grid.axes[1] * k1, indexing="ij")
@@ -89,7 +87,8 @@ def plot_landscape(grid, names, path_xs, png: Path, title=""):
         p = np.asarray(path_xs)
         ax.plot(p[:, 0] * k0, p[:, 1] * k1, "w.-", lw=1.2, label="optimiser path")
         ax.plot(p[0, 0] * k0, p[0, 1] * k1, "wo", ms=7, label="start")
-        ax.plot(p[-1, 0] * k0, p[-1, 1] * k1, "r*", ms=12, label="final")
+        f = p[-1] if final is None else np.asarray(final)
+        ax.plot(f[0] * k0, f[1] * k1, "r*", ms=12, label="final (best iterate)")
     ax.plot(grid.best[0] * k0, grid.best[1] * k1, "kx", ms=10, mew=2, label="grid best")
     ax.set_xlabel(label(names[0]))
     ax.set_ylabel(label(names[1]))
@@ -98,3 +97,23 @@ def plot_landscape(grid, names, path_xs, png: Path, title=""):
     fig.tight_layout()
     fig.savefig(png, dpi=120)
     plt.close(fig)
+
+
+def plot_tornado(result: dict, path, title: str | None = None):
+    """Tornado chart of :func:`optim.sensitivity.sensitivities`: per metric, the
+    elasticities (% metric change per % parameter change), largest on top."""
+    metrics = result["metrics"]
+    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 0.35 * len(result["names"]) + 1.5),
+                             squeeze=False)
+    for ax, m, el in zip(axes[0], metrics, result["elasticity"]):
+        order = np.argsort(np.abs(el))
+        ax.barh(np.arange(len(order)), el[order], color=np.where(el[order] >= 0, "C3", "C0"))
+        ax.set_yticks(np.arange(len(order)), [result["names"][i] for i in order], fontsize=8)
+        ax.axvline(0.0, color="k", lw=0.8)
+        ax.set_xlabel("elasticity (dm/m) / (dp/p)")
+        ax.set_title(m, fontsize=9)
+    fig.suptitle(title or "local sensitivities (ensemble AD) at the design")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

@@ -14,52 +14,14 @@ from __future__ import annotations
 import dataclasses
 from typing import Sequence
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxcrank.params import Mechanism, ParameterError, paper, with_clearance
+from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, set_parameter
 
 from .objective import Objective, value
-
-
-def _leaf(mech: Mechanism, name: str):
-    """(getter, current value) of the numeric parameter at dotted path ``name``."""
-    def get(m):
-        for p in name.split("."):
-            m = getattr(m, p)
-        return m
-
-    try:
-        current = get(mech)
-    except AttributeError:
-        raise ParameterError(f"unknown design variable {name!r}: use a numeric Mechanism field such as "
-                             "'rod_length', a dotted path such as 'contact.restitution', or "
-                             "'clearance_B' / 'clearance_C'") from None
-    if isinstance(current, (str, bool, eqx.Module)):
-        raise ParameterError(f"design variable {name!r} is not a number")
-    return get, current
-
-
-def set_parameter(mech: Mechanism, name: str, x) -> Mechanism:
-    """``mech`` with parameter ``name`` set to ``x`` (SI). Names are the
-    mechanism's scalar fields (``crank_length``, ``rod_length``, ``offset``, ...),
-    dotted paths into its parts (``contact.restitution``) or ``clearance_B`` /
-    ``clearance_C`` (radial clearance, m: the pin shrinks, the hole stays)."""
-    if name == "clearance_B":
-        return with_clearance(mech, clearance_B=x)
-    if name == "clearance_C":
-        return with_clearance(mech, clearance_C=x)
-    return eqx.tree_at(_leaf(mech, name)[0], mech, x)
-
-
-def get_parameter(mech: Mechanism, name: str) -> float:
-    """Current value (SI) of a design variable name (see :func:`set_parameter`)."""
-    if name in ("clearance_B", "clearance_C"):
-        return float(getattr(mech, "joint_" + name[-1]).clearance)
-    return float(_leaf(mech, name)[1])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,7 +154,7 @@ def paper_problem(objective: Objective = Objective(), start: Sequence[float] | N
                    objective=objective, title="paper: RMS transmission-angle error over L1, L2")
 
 
-def tolerance_problem(objective: Objective = Objective(), cost_weight: float = 0.01,
+def tolerance_problem(objective: Objective = Objective(), cost_weight: float = 0.005,
                       start: Sequence[float] | None = None) -> Problem:
     """Tolerance allocation: radial clearances c_B, c_C in [0.1, 0.5] mm at the
     paper's geometry, minimising RMS transmission-angle error + manufacturing cost

@@ -27,23 +27,37 @@ from .problem import Problem
 def _batch(problem: Problem, xs):
     def one(x):
         sq, ok = pathwise_errors(problem.mechanism(x), problem.objective)
-        return jnp.sqrt(jnp.mean(sq)) + problem.cost(x), ok
+        return jnp.sqrt(jnp.mean(sq)), ok
 
     return jax.vmap(one)(xs)
 
 
-def evaluate(problem: Problem, xs, chunk: int = 16, progress: bool = True):
+def evaluate(problem: Problem, xs, chunk: int = 16, progress: bool = True, errors=None):
     """Objective (degrees, incl. cost) and status at SI designs ``xs`` (N, n).
 
     Returns ``(values, ok)``: ``values[i]`` is NaN exactly where ``ok[i]`` is False
-    (the solve failed; see ``jaxcrank.simulate(..., throw=False)``).
+    (the solve failed; see ``jaxcrank.simulate(..., throw=False)``). ``errors``:
+    the Eq. 19 values (degrees, NaN where failed) of these designs from an earlier
+    evaluation of the same objective; then nothing is solved and only the cost is added.
     """
+    xs = np.atleast_2d(np.asarray(xs, dtype=float))
+    cost = np.array([float(problem.cost(x)) for x in xs])
+    if errors is None:
+        errors, ok = rms_errors(problem, xs, chunk, progress)
+    else:
+        errors = np.asarray(errors, float)
+        ok = np.isfinite(errors)
+    return np.where(ok, errors + cost, np.nan), ok
+
+
+def rms_errors(problem: Problem, xs, chunk: int = 16, progress: bool = True):
+    """Eq. 19 values (degrees, without the cost term) and status at SI designs ``xs``."""
     xs = np.atleast_2d(np.asarray(xs, dtype=float))
     values, oks = [], []
     with tqdm(total=len(xs), desc="designs", unit="design", disable=not progress) as bar:
         for i in range(0, len(xs), chunk):
             block = xs[i:i + chunk]
-            pad = chunk - len(block) if len(xs) > chunk else 0  # one compiled shape
+            pad = chunk - len(block)  # one compiled shape per chunk size, also for a single design
             padded = np.concatenate([block, np.repeat(block[-1:], pad, axis=0)]) if pad else block
             v, ok = _batch(problem, jnp.asarray(padded))
             v, ok = np.asarray(v)[:len(block)], np.asarray(ok)[:len(block)]
@@ -57,30 +71,81 @@ def evaluate(problem: Problem, xs, chunk: int = 16, progress: bool = True):
 class Grid:
     """Result of :func:`grid_search` over two variables.
 
-    Attributes: axes (2 arrays, SI), values (n0, n1) degrees (NaN where infeasible or
-    failed), feasible and ok masks, best (SI design) and best_value (degrees).
+    Attributes: axes (2 arrays, SI), values (n0, n1) objective incl. cost, degrees
+    (NaN where infeasible or failed), errors (n0, n1) the Eq. 19 part alone, feasible
+    and ok masks, best (SI design) and best_value (degrees).
     """
 
     axes: tuple[np.ndarray, np.ndarray]
     values: np.ndarray
+    errors: np.ndarray
     feasible: np.ndarray
     ok: np.ndarray
     best: np.ndarray
     best_value: float
 
 
-def grid_search(problem: Problem, n: int = 21, chunk: int = 21, progress: bool = True) -> Grid:
-    """Evaluate an ``n`` x ``n`` grid over the box of a two-variable problem."""
+def grid_axes(problem: Problem, n: int):
+    """The ``n`` points per axis of the grid over the box, SI."""
+    return tuple(np.linspace(lo, hi, n) for lo, hi in zip(problem.lower, problem.upper))
+
+
+def grid_search(problem: Problem, n: int = 21, chunk: int = 21, progress: bool = True, errors=None) -> Grid:
+    """Evaluate an ``n`` x ``n`` grid over the box of a two-variable problem.
+
+    ``errors``: the (n, n) Eq. 19 values of the same grid from an earlier run of
+    the same objective (:func:`read_grid`); the cost term is then recomputed, so a
+    landscape can be reused with another ``cost_weight``."""
     if problem.n != 2:
         raise ValueError("grid_search needs a two-variable problem")
-    axes = tuple(np.linspace(lo, hi, n) for lo, hi in zip(problem.lower, problem.upper))
+    axes = grid_axes(problem, n)
     pts = np.array(list(itertools.product(*axes)))
     feasible = problem.feasible(pts)
     values = np.full(len(pts), np.nan)
+    errs = np.full(len(pts), np.nan)
     ok = np.zeros(len(pts), bool)
     if feasible.any():
-        v, o = evaluate(problem, pts[feasible], chunk=chunk, progress=progress)
-        values[feasible], ok[feasible] = v, o
+        if errors is None:
+            e, o = rms_errors(problem, pts[feasible], chunk=chunk, progress=progress)
+        else:
+            e = np.asarray(errors, float).reshape(-1)[feasible]
+            o = np.isfinite(e)
+        cost = np.array([float(problem.cost(x)) for x in pts[feasible]])
+        errs[feasible], ok[feasible] = e, o
+        values[feasible] = np.where(o, e + cost, np.nan)
     i = int(np.nanargmin(values))
-    return Grid(axes, values.reshape(n, n), feasible.reshape(n, n), ok.reshape(n, n), pts[i], float(values[i]))
+    return Grid(axes, values.reshape(n, n), errs.reshape(n, n), feasible.reshape(n, n), ok.reshape(n, n),
+                pts[i], float(values[i]))
+
+
+def write_grid(path, problem: Problem, grid: Grid):
+    """``grid.csv``: one row per grid point; SI variables, the Eq. 19 error, the
+    cost and their sum (degrees), feasibility and solve status."""
+    import csv
+
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow([f"{n}_SI" for n in problem.names] + ["rms_error_deg", "cost_deg", "objective_deg",
+                                                          "feasible", "ok"])
+        for (i, a), (j, b) in itertools.product(enumerate(grid.axes[0]), enumerate(grid.axes[1])):
+            v, e = grid.values[i, j], grid.errors[i, j]
+            w.writerow([repr(float(a)), repr(float(b)), repr(float(e)), repr(float(v - e)), repr(float(v)),
+                        bool(grid.feasible[i, j]), bool(grid.ok[i, j])])
+
+
+def read_grid(path, problem: Problem, n: int):
+    """The (n, n) Eq. 19 errors of a ``grid.csv`` written by :func:`write_grid` for
+    the same variables and box (checked); NaN where infeasible or failed."""
+    import csv
+
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    cols = [f"{nm}_SI" for nm in problem.names]
+    if len(rows) != n * n or any(c not in rows[0] for c in cols):
+        raise ValueError(f"{path} is not an {n} x {n} grid over {list(problem.names)}")
+    pts = np.array([[float(r[c]) for c in cols] for r in rows])
+    expect = np.array(list(itertools.product(*grid_axes(problem, n))))
+    if not np.allclose(pts, expect, rtol=1e-12, atol=0.0):
+        raise ValueError(f"{path}: its grid points are not the {n} x {n} grid over this problem's box")
+    return np.array([float(r["rms_error_deg"]) for r in rows]).reshape(n, n)
 

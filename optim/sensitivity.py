@@ -1,0 +1,127 @@
+"""Local sensitivities of the mean-square metrics by AD, in one call.
+
+``sensitivities(mech)`` gives, at one design, the value of each metric in
+:data:`METRICS` and its gradient with respect to every parameter in ``names``
+(any name :func:`jaxcrank.params.set_parameter` accepts), plus the normalised
+elasticities ``(dm/dp) (p / m)`` (percent change of the metric per percent change
+of the parameter), which :func:`optim.plots.plot_tornado` draws as a tornado chart.
+
+The same care as the optimisation (:mod:`optim.objective`): over the paper's
+window the pathwise derivative of a chaotic trajectory is ~1e27 and meaningless;
+the gradient here is the ensemble-sensitivity estimate. One solve at the design
+gives the exact metric values and the pins' states in their bearings at the start
+of K short windows; each window is re-solved from that state (carried over to the
+perturbed design) with an implicit solver, the per-window sums of squares are
+differentiated in one ``vmap`` of reverse-mode Jacobians, and the ensemble mean is
+taken.
+
+Valid for: time averages of squared deviations, i.e. the RMS metrics
+(transmission-angle error, rod-centre and slider x deviation, driving-moment
+deviation). Not valid for: peaks (largest contact force, largest deviation,
+largest acceleration): an extreme value over chaotic impacts has no trend-following
+local derivative (use a sweep over a band, :mod:`jaxcrank.sweep`, for those).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxcrank import ideal, model
+from jaxcrank.outputs import DEG
+from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameter
+from jaxcrank.solve import simulate
+
+from .objective import Objective, _eval_samples, start_state, window_starts
+
+#: metrics whose gradient the ensemble estimate follows (name -> meaning); units in the suffix
+METRICS = {
+    "rms_transmission_angle_error_deg": "RMS of actual - ideal transmission angle (paper Eq. 19)",
+    "rms_rod_x_deviation_m": "RMS of rod-centre x - ideal",
+    "rms_slider_x_deviation_m": "RMS of slider x - ideal",
+    "rms_driving_moment_deviation_N_m": "RMS of driving moment - ideal driving moment",
+}
+
+#: default parameters: the physical design and operating parameters (not the smoothing widths)
+PARAMETERS = ("crank_length", "rod_length", "offset", "rod_mass", "slider_mass", "rod_inertia", "crank_speed",
+              "clearance_B", "clearance_C", "contact.restitution", "friction.coefficient",
+              "rod_material.youngs_modulus")
+
+
+def deviations(mech: Mechanism, ts, ys):
+    """Per-sample deviations from the ideal mechanism, shape (n, 4), in the order
+    and units of :data:`METRICS` (deg, m, m, N m)."""
+    def one(t, y):
+        f = model.evaluate(mech, t, y)
+        ta = (ideal.transmission_angle(f.q[2]) - ideal.transmission_angle(f.ideal_q[2])) * DEG
+        return jnp.stack([ta, f.q[0] - f.ideal_q[0], f.q[3] - f.ideal_q[3],
+                          f.driving_moment - f.ideal_driving_moment])
+
+    return jax.vmap(one)(ts, ys)
+
+
+def _with(base, names, x):
+    mech = base
+    for i, n in enumerate(names):
+        mech = set_parameter(mech, n, x[i])
+    return mech
+
+
+def window_sums(base: Mechanism, names, x, starts, i, n_window: int, dt: float, obj: Objective):
+    """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
+    carried-over start state: the sums of squared deviations over its samples,
+    shape (4,), in the units of :data:`METRICS` squared, and whether it finished."""
+    m = _with(base, names, x)
+    ts = starts.t[i] + dt * jnp.arange(n_window + 1)
+    s = simulate(m, ts=ts, y0=start_state(m, starts, i), solver=obj.window_solver, rtol=obj.rtol,
+                 atol=obj.atol, max_steps=obj.window_max_steps, throw=False)
+    ok = s.ok & jnp.all(jnp.isfinite(s.ys))
+    ys = jnp.where(ok, s.ys, 0.0)  # a failed window is left out, not propagated as NaN
+    return jnp.sum(deviations(m, s.ts[1:], ys[1:]) ** 2, axis=0), ok
+
+
+def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objective = Objective()) -> dict:
+    """Values, gradients and elasticities of :data:`METRICS` at ``mech`` over the
+    objective's window (``obj``: window, ensemble windows, solver, tolerances).
+
+    Returns a dict: ``names``, ``units`` (of each parameter), ``x`` (SI values),
+    ``metrics`` (names), ``value`` (4,) exact metric values, ``gradient`` (4, P)
+    in metric unit per parameter unit, ``elasticity`` (4, P) dimensionless,
+    ``windows`` and ``windows_ok`` (ensemble size and how many finished)."""
+    names = list(names)
+    units = [parameter_unit(n) for n in names]
+    grid = obj.grid(mech)  # concrete sample grid of the design (crank speed may be a variable below)
+    n_start, _, n_window, dt = grid
+    sim, n_start, _ = _eval_samples(mech, obj, True, grid)
+    late = slice(n_start + 1, None)
+    dev = deviations(mech, sim.ts[late], sim.ys[late])
+    value = jnp.sqrt(jnp.mean(dev**2, axis=0))
+    starts = window_starts(sim, n_start, grid, obj)
+    x0 = jnp.array([get_parameter(mech, n) for n in names])
+
+    def jac(i):
+        sums, vjp, ok = jax.vjp(lambda x: window_sums(mech, names, x, starts, i, n_window, dt, obj), x0,
+                                has_aux=True)
+        (rows,) = jax.vmap(vjp)(jnp.eye(sums.shape[0]))
+        return sums, rows, ok
+
+    sums, rows, ok = jax.jit(jax.vmap(jac))(jnp.arange(starts.t.shape[0]))
+    sums, rows, ok = np.asarray(sums), np.asarray(rows), np.asarray(ok)
+    n_ok = int(ok.sum())
+    if n_ok < 0.5 * len(ok):
+        raise RuntimeError(f"{len(ok) - n_ok} of {len(ok)} ensemble windows failed; raise "
+                           "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window")
+    w = ok.astype(float)
+    estimate = np.sqrt(np.einsum("k,kc->c", w, sums) / (n_window * n_ok))
+    grad_sq = np.einsum("k,kcp->cp", w, rows) / (n_window * n_ok)
+    gradient = grad_sq / (2.0 * estimate[:, None])
+    value = np.asarray(value)
+    x = np.asarray(x0)
+    return {"names": names, "units": units, "x": x, "metrics": list(METRICS), "value": value,
+            "gradient": gradient, "elasticity": gradient * x[None, :] / value[:, None],
+            "windows": int(len(ok)), "windows_ok": n_ok,
+            "window_s": float(n_window * dt), "evaluation_window_s": (obj.t_start, obj.t_end),
+            "starts": starts, "grid": grid}
