@@ -88,17 +88,22 @@ def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
     return Mechanism(**kwargs)
 
 
-def load(path) -> Mechanism:
-    """Read a TOML config; raises ParameterError naming the file on malformed input."""
+def load_toml(path, build):
+    """``build(dict)`` of a TOML file; ParameterErrors (and malformed TOML) name the file."""
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{path}: malformed TOML: {err}") from None
     try:
-        return from_dict(data)
+        return build(data)
     except ParameterError as err:
         raise ParameterError(f"{path}: {err}") from None
+
+
+def load(path) -> Mechanism:
+    """Read a TOML config; raises ParameterError naming the file on malformed input."""
+    return load_toml(path, from_dict)
 
 
 def dumps(mech: Mechanism) -> str:

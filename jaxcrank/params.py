@@ -341,6 +341,14 @@ def set_parameter(mech: Mechanism, name: str, x) -> Mechanism:
     return eqx.tree_at(_leaf(mech, name)[0], mech, x)
 
 
+def set_parameters(mech: Mechanism, names, values) -> Mechanism:
+    """``mech`` with each parameter in ``names`` set to the matching entry of
+    ``values`` (SI; traceable), as :func:`set_parameter`."""
+    for i, name in enumerate(names):
+        mech = set_parameter(mech, name, values[i])
+    return mech
+
+
 def get_parameter(mech: Mechanism, name: str) -> float:
     """Current value (SI) of a design variable name (see :func:`set_parameter`)."""
     if name in ("clearance_B", "clearance_C"):

@@ -172,7 +172,7 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
             if sampling in ("lhs", "random"):
                 ax.plot(x[ok], y[ok], ".", ms=4)
             else:
-                sel = ok & np.ones_like(ok)
+                sel = ok
                 if sampling == "oat":  # the line of this parameter: the others at their base value
                     others = [o for o in param_cols if o != c]
                     sel = ok & np.all([np.asarray(table[o]) == np.median(np.asarray(table[o])) for o in others], axis=0) \

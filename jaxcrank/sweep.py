@@ -43,7 +43,7 @@ from tqdm.auto import tqdm
 
 from . import config, ideal
 from .outputs import DEG, frames
-from .params import Mechanism, ParameterError, get_parameter, parameter_unit, set_parameter
+from .params import Mechanism, ParameterError, get_parameter, parameter_unit, set_parameters
 from .solve import SOLVERS, simulate
 
 #: headline metrics (name -> meaning); units are the name's suffix
@@ -140,9 +140,7 @@ def simulate_design(base: Mechanism, names: Sequence[str], x, settings: Settings
     """One design: ``base`` with ``names`` set to ``x`` (SI), simulated with
     ``throw=False``. Returns (metrics dict, status code (index into
     :data:`STATUSES`), accepted steps). Traceable; :func:`run` vmaps it."""
-    mech = base
-    for i, name in enumerate(names):
-        mech = set_parameter(mech, name, x[i])
+    mech = set_parameters(base, names, x)
     period = 2.0 * math.pi / mech.crank_speed
     ts = jnp.linspace(0.0, settings.revolutions, settings.n_samples) * period
     sim = simulate(mech, ts=ts, solver=settings.solver, rtol=settings.rtol, atol=settings.atol,
@@ -270,16 +268,15 @@ def _evaluate(base, names, settings, xs):
     executable as a one-device run, so the table does not depend on the device
     count (impact chaos would amplify any last-bit difference)."""
     fn = _batch_fn(tuple(names), settings)
-    sharding = NamedSharding(_mesh(), P("designs"))
+    sharding = NamedSharding(_mesh(), P("designs"))  # rows over all devices of all processes
     per = len(xs) // jax.process_count()
     local = xs[jax.process_index() * per:(jax.process_index() + 1) * per]
     batch = jax.make_array_from_process_local_data(sharding, local, xs.shape)
-    shards = [(s.device, fn(base, s.data)) for s in batch.addressable_shards]  # async, one per device
+    results = [fn(base, s.data) for s in batch.addressable_shards]  # async, one call per device
     outs = []
     for k, width in enumerate((len(METRICS), None, None)):
         shape = (len(xs), width) if width else (len(xs),)
-        outs.append(jax.make_array_from_single_device_arrays(
-            shape, NamedSharding(_mesh(), P("designs")), [o[k] for _, o in shards]))
+        outs.append(jax.make_array_from_single_device_arrays(shape, sharding, [r[k] for r in results]))
     if jax.process_count() > 1:
         from jax.experimental import multihost_utils
 
@@ -298,10 +295,14 @@ def read_table(path) -> dict[str, np.ndarray]:
     """A sweep table (CSV) as columns: numbers as float arrays (empty cells NaN),
     ``status`` and ``message`` as string arrays; rows sorted by ``index``."""
     with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+        return _table(list(csv.DictReader(f)))
+
+
+def _table(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
+    """Rows of CSV cells (strings) as columns sorted by ``index`` (see :func:`read_table`)."""
     if not rows:
         return {}
-    rows.sort(key=lambda r: int(r["index"]))
+    rows = sorted(rows, key=lambda r: int(r["index"]))
     out = {}
     for key in rows[0]:
         vals = [r[key] for r in rows]
@@ -376,10 +377,7 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
         if i in done:
             continue
         try:
-            mech = base
-            for name, v in zip(names, designs[i]):
-                mech = set_parameter(mech, name, float(v))
-            validate(mech)
+            validate(set_parameters(base, names, [float(v) for v in designs[i]]))
             todo.append(i)
         except ParameterError as err:
             given = ", ".join(f"{n} = {v:g}" for n, v in zip(names, designs[i]))
@@ -410,17 +408,7 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
 
             multihost_utils.sync_global_devices("jaxcrank sweep table written")
         return read_table(path)
-    tmp = {c: [r[k] for r in rows] for k, c in enumerate(cols)}
-    order = np.argsort(np.asarray(tmp["index"], int))
-    table = {}
-    for c, vals in tmp.items():
-        vals = [vals[k] for k in order]
-        if c in ("status", "message"):
-            table[c] = np.array(vals, dtype=object)
-        else:
-            table[c] = np.array([float(v) if v != "" else np.nan for v in vals])
-    table["index"] = table["index"].astype(int)
-    return table
+    return _table([dict(zip(cols, map(str, r))) for r in rows])
 
 
 def summarize(table: Mapping[str, np.ndarray], quantiles=(0.05, 0.5, 0.95)) -> dict:
@@ -517,14 +505,4 @@ def spec_from_dict(d: Mapping) -> Spec:
 
 def load_spec(path) -> Spec:
     """Read a sweep spec TOML file (errors name the file)."""
-    import tomllib
-
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise ParameterError(f"{path}: malformed TOML: {err}") from None
-    try:
-        return spec_from_dict(data)
-    except ParameterError as err:
-        raise ParameterError(f"{path}: {err}") from None
+    return config.load_toml(path, spec_from_dict)

@@ -43,6 +43,7 @@ from .optimize import METHODS, Settings, optimize
 from .problem import PROBLEMS, Problem
 
 PAPER_OPTIMUM_DEG = 0.097966
+GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
 PAPER_REDUCTION_PCT = 8.44
 
 
@@ -151,7 +152,7 @@ def run(args) -> int:
     grid_info = None
     if args.grid and problem.n == 2:
         errors = search.read_grid(args.grid_from, problem, args.grid) if args.grid_from else None
-        grid = search.grid_search(problem, n=args.grid, progress=not args.quiet, errors=errors)
+        grid = search.grid_search(problem, n=args.grid, chunk=GRID_CHUNK, progress=not args.quiet, errors=errors)
         search.write_grid(out / "grid.csv", problem, grid)
         path = [[h[f"{n}_SI"] for n in problem.names] for h in hist]
         plots.plot_landscape(grid, problem.names, path, out / "landscape.png", title=problem.title,
@@ -159,7 +160,7 @@ def run(args) -> int:
         # the grid's evaluator at the final design: the same compiled solve as the grid (a
         # differently compiled solve of the same design differs by ~0.5 %: impact chaos
         # amplifies last-bit rounding), so the comparison with the grid's best is like for like
-        final_same, _ = search.evaluate(problem, [res["final"]], chunk=args.grid, progress=False)
+        final_same, _ = search.evaluate(problem, [res["final"]], chunk=GRID_CHUNK, progress=False)
         grid_info = {"points_per_axis": args.grid, "best_design_SI": grid.best.tolist(),
                      "best_objective_deg": grid.best_value,
                      "final_objective_grid_evaluator_deg": float(final_same[0]),

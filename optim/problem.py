@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, set_parameter
+from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, set_parameters
 
 from .objective import Objective, value
 
@@ -124,10 +124,7 @@ class Problem:
     # ------------------------------------------------------------------ model
     def mechanism(self, x) -> Mechanism:
         """The mechanism at SI design ``x`` (traceable)."""
-        mech = self.base
-        for i, name in enumerate(self.names):
-            mech = set_parameter(mech, name, x[i])
-        return mech
+        return set_parameters(self.base, self.names, x)
 
     def cost(self, x):
         """Manufacturing cost term, degrees: ``cost_weight * sum_j cost_reference / c_j``

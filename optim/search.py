@@ -32,22 +32,21 @@ def _batch(problem: Problem, xs):
     return jax.vmap(one)(xs)
 
 
-def evaluate(problem: Problem, xs, chunk: int = 16, progress: bool = True, errors=None):
+def evaluate(problem: Problem, xs, chunk: int = 16, progress: bool = True):
     """Objective (degrees, incl. cost) and status at SI designs ``xs`` (N, n).
 
     Returns ``(values, ok)``: ``values[i]`` is NaN exactly where ``ok[i]`` is False
-    (the solve failed; see ``jaxcrank.simulate(..., throw=False)``). ``errors``:
-    the Eq. 19 values (degrees, NaN where failed) of these designs from an earlier
-    evaluation of the same objective; then nothing is solved and only the cost is added.
+    (the solve failed; see ``jaxcrank.simulate(..., throw=False)``).
     """
     xs = np.atleast_2d(np.asarray(xs, dtype=float))
+    errors, ok = rms_errors(problem, xs, chunk, progress)
+    return _with_cost(problem, xs, errors, ok), ok
+
+
+def _with_cost(problem: Problem, xs, errors, ok):
+    """Eq. 19 errors plus the problem's cost at designs ``xs``; NaN where not ``ok``."""
     cost = np.array([float(problem.cost(x)) for x in xs])
-    if errors is None:
-        errors, ok = rms_errors(problem, xs, chunk, progress)
-    else:
-        errors = np.asarray(errors, float)
-        ok = np.isfinite(errors)
-    return np.where(ok, errors + cost, np.nan), ok
+    return np.where(ok, errors + cost, np.nan)
 
 
 def rms_errors(problem: Problem, xs, chunk: int = 16, progress: bool = True):
@@ -110,9 +109,8 @@ def grid_search(problem: Problem, n: int = 21, chunk: int = 21, progress: bool =
         else:
             e = np.asarray(errors, float).reshape(-1)[feasible]
             o = np.isfinite(e)
-        cost = np.array([float(problem.cost(x)) for x in pts[feasible]])
         errs[feasible], ok[feasible] = e, o
-        values[feasible] = np.where(o, e + cost, np.nan)
+        values[feasible] = _with_cost(problem, pts[feasible], e, o)
     i = int(np.nanargmin(values))
     return Grid(axes, values.reshape(n, n), errs.reshape(n, n), feasible.reshape(n, n), ok.reshape(n, n),
                 pts[i], float(values[i]))

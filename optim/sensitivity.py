@@ -32,7 +32,7 @@ import numpy as np
 
 from jaxcrank import ideal, model
 from jaxcrank.outputs import DEG
-from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameter
+from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
 from jaxcrank.solve import simulate
 
 from .objective import Objective, _eval_samples, start_state, window_starts
@@ -63,18 +63,11 @@ def deviations(mech: Mechanism, ts, ys):
     return jax.vmap(one)(ts, ys)
 
 
-def _with(base, names, x):
-    mech = base
-    for i, n in enumerate(names):
-        mech = set_parameter(mech, n, x[i])
-    return mech
-
-
 def window_sums(base: Mechanism, names, x, starts, i, n_window: int, dt: float, obj: Objective):
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
     carried-over start state: the sums of squared deviations over its samples,
     shape (4,), in the units of :data:`METRICS` squared, and whether it finished."""
-    m = _with(base, names, x)
+    m = set_parameters(base, names, x)
     ts = starts.t[i] + dt * jnp.arange(n_window + 1)
     s = simulate(m, ts=ts, y0=start_state(m, starts, i), solver=obj.window_solver, rtol=obj.rtol,
                  atol=obj.atol, max_steps=obj.window_max_steps, throw=False)
