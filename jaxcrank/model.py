@@ -139,8 +139,11 @@ def eccentricities(mech: Mechanism, t, y):
 def state_from_eccentricities(mech: Mechanism, t, d, d_rate, rest):
     """Inverse of :func:`eccentricities`: the scaled state whose pins sit at
     eccentricities ``d`` (2, 2) m moving at ``d_rate`` (2, 2) m/s in bearings B and
-    C at time t; ``rest`` are the remaining scaled state entries (memories, works).
-    Used to carry a pin-in-bearing state over to another design."""
+    C at time t; ``rest`` are the remaining state entries in SI units (approach-speed
+    memories, m/s; driver and dissipated work, J), scaled here for ``mech``.
+    Used to carry a pin-in-bearing state over to another design: the state scales
+    depend on the design's clearances, so a scaled entry carried over unchanged
+    would change its physical value with the clearance."""
     if clearance_joints(mech) != ("B", "C"):
         raise ValueError("state_from_eccentricities() needs clearance at both B and C")
     t = jnp.asarray(t, dtype=float)
@@ -156,7 +159,7 @@ def state_from_eccentricities(mech: Mechanism, t, d, d_rate, rest):
         return jnp.stack([centre[0], centre[1], th2, x3]) - ideal.positions(mech, t_)
 
     s, sd = jax.jvp(positions, (d, t), (d_rate, jnp.ones_like(t)))
-    return jnp.concatenate([jnp.concatenate([s, sd]) / state_scales(mech)[:8], rest])
+    return jnp.concatenate([s, sd, rest]) / state_scales(mech)
 
 
 def memory_target(eccentricity, relative_velocity, clearance):

@@ -351,9 +351,14 @@ def set_parameters(mech: Mechanism, names, values) -> Mechanism:
 
 def get_parameter(mech: Mechanism, name: str) -> float:
     """Current value (SI) of a design variable name (see :func:`set_parameter`)."""
+    return float(parameter_value(mech, name))
+
+
+def parameter_value(mech: Mechanism, name: str):
+    """Value (SI) of parameter ``name`` of ``mech``, traceable (an array or a float)."""
     if name in ("clearance_B", "clearance_C"):
-        return float(getattr(mech, "joint_" + name[-1]).clearance)
-    return float(_leaf(mech, name)[1])
+        return getattr(mech, "joint_" + name[-1]).clearance
+    return _leaf(mech, name)[1]
 
 
 _UNITS = {

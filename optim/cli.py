@@ -8,7 +8,7 @@ vmap grid over the box with the optimiser's path; two-variable problems) and
 
 Config TOML (every key optional)::
 
-    problem = "paper"            # or "tolerance"
+    problem = "paper"            # or "tolerance", "robust"
     [optimizer]                  # optim.optimize.Settings fields
     method = "adam"
     max_iterations = 30
@@ -22,6 +22,9 @@ Config TOML (every key optional)::
     A = [[1.0, -1.0]]
     b = [-0.05]
     cost_weight = 0.0
+    scatter = [["crank_length", 5e-5, "normal"], ["clearance_C", 5e-5, "uniform"]]  # robust problem
+    samples = 8                  # manufactured parts averaged (0: nominal design only)
+    seed = 0
     [mechanism]                  # base mechanism, as in `jaxcrank simulate`'s config.toml
 """
 
@@ -108,7 +111,7 @@ def build(cfg) -> tuple[Problem, Settings]:
     design = dict(cfg.get("design", {}))
     if design:
         design = _fields(Problem, "design", design)
-        design = {k: (tuple(tuple(r) for r in v) if k == "A" else tuple(v) if isinstance(v, list) else v)
+        design = {k: (tuple(tuple(r) for r in v) if k in ("A", "scatter") else tuple(v) if isinstance(v, list) else v)
                   for k, v in design.items()}
         problem = dataclasses.replace(problem, **design)
     settings = Settings(**_fields(Settings, "optimizer", cfg.get("optimizer", {})))
@@ -123,7 +126,9 @@ def resolved(problem: Problem, settings: Settings, name: str) -> dict:
         "design": {"names": list(problem.names), "lower": list(problem.lower), "upper": list(problem.upper),
                    "start": list(problem.start) if problem.start is not None else None,
                    "A": [list(r) for r in problem.A], "b": list(problem.b),
-                   "cost_weight": problem.cost_weight, "cost_reference": problem.cost_reference},
+                   "cost_weight": problem.cost_weight, "cost_reference": problem.cost_reference,
+                   "scatter": [list(e) for e in problem.scatter], "samples": problem.samples,
+                   "seed": problem.seed},
         "mechanism": mech_config.to_dict(problem.base),
     }
 

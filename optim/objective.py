@@ -141,7 +141,8 @@ class Starts(NamedTuple):
     """Pin-in-bearing states at the start of the ensemble windows (no gradient), from :func:`reference`.
 
     Attributes: t (K,) s; eccentricity (K, 2, 2) m and eccentricity_rate (K, 2, 2)
-    m/s for joints (B, C); rest (K, 4) the other scaled state entries; clearance
+    m/s for joints (B, C); rest (K, 4) the other state entries in SI units
+    (approach-speed memories at B and C, m/s; driver and dissipated work, J); clearance
     (2,) m, of the design they were taken from.
     """
 
@@ -172,7 +173,8 @@ def window_starts(sim, n_start: int, grid, obj: Objective) -> Starts:
     t0s, y0s = sim.ts[idx], sim.ys[idx]
     d, d_rate = jax.vmap(model.eccentricities, in_axes=(None, 0, 0))(mech, t0s, y0s)
     clearance = jnp.stack([mech.joint_B.clearance, mech.joint_C.clearance])
-    return jax.lax.stop_gradient(Starts(t0s, d, d_rate, y0s[:, 8:], clearance))
+    rest = y0s[:, 8:] * model.state_scales(mech)[8:]  # SI: the scales change with the clearances
+    return jax.lax.stop_gradient(Starts(t0s, d, d_rate, rest, clearance))
 
 
 def start_state(mech: Mechanism, starts: Starts, i):

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import time
 from pathlib import Path
@@ -80,20 +81,22 @@ def _optimizer(settings: Settings):
         max_linesearch_steps=settings.max_linesearch_steps, initial_guess_strategy="one"))
 
 
-class _Scaled:
-    """The problem's objective on the scaled design, divided by ``f0``."""
+@functools.lru_cache(maxsize=8)
+def _compiled(problem: Problem, penalty: float):
+    """Compiled functions of ``problem`` on the scaled design ``u``, objective divided
+    by ``f0`` (an argument, so a resumed or repeated run reuses the compilation):
+    value-and-gradient inside the feasible set, L-BFGS's extension beyond it, and the
+    pathwise objective at an SI design (the start value ``f0``)."""
 
-    def __init__(self, problem: Problem, f0: float, penalty: float):
-        self.problem, self.f0, self.penalty = problem, f0, penalty
-        self.value_and_grad = jax.jit(jax.value_and_grad(self.inside))
-        self.extended = jax.jit(self.outside)
+    def inside(u, f0):
+        return problem.objective_value(problem.from_unit(u)) / f0
 
-    def inside(self, u):
-        return self.problem.objective_value(self.problem.from_unit(u)) / self.f0
+    def outside(u, f0):
+        p = problem.project(u)
+        return inside(p, f0) + penalty * jnp.sum((u - p) ** 2)
 
-    def outside(self, u):
-        p = self.problem.project(u)
-        return self.inside(p) + self.penalty * jnp.sum((u - p) ** 2)
+    return (jax.jit(jax.value_and_grad(inside)), jax.jit(outside),
+            jax.jit(lambda x: problem.objective_value(x, method="pathwise")))
 
 
 def _flatten(state):
@@ -138,6 +141,7 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
     (its objective, degrees) and ``last`` (the last iterate, SI).
     """
     opt = _optimizer(settings)
+    value_and_grad, extended, start_value = _compiled(problem, settings.penalty)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"
     if resume:
         if ckpt is None or not ckpt.exists():
@@ -151,9 +155,8 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
         quiet, converged = meta["quiet"], meta["converged"]
     else:
         u = problem.start_unit()
-        f0 = float(problem.objective_value(problem.from_unit(u), method="pathwise"))
+        f0 = float(start_value(problem.from_unit(u)))
         state, history, quiet, converged = opt.init(u), [], 0, None
-    scaled = _Scaled(problem, f0, settings.penalty)
 
     done_here = 0
     start_it = len(history)
@@ -161,13 +164,13 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
                disable=not progress)
     while converged is None and len(history) < settings.max_iterations:
         tic = time.perf_counter()
-        value, grad = scaled.value_and_grad(u)
+        value, grad = value_and_grad(u, f0)
         x = problem.from_unit(u)
         proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
         if settings.method == "adam":
             updates, state = opt.update(grad, state, u)
         else:
-            updates, state = opt.update(grad, state, u, value=value, grad=grad, value_fn=scaled.extended)
+            updates, state = opt.update(grad, state, u, value=value, grad=grad, value_fn=lambda v: extended(v, f0))
         u_new = problem.project(optax.apply_updates(u, updates))
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))

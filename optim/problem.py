@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, set_parameters
+from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
 
 from .objective import Objective, value
 
@@ -38,6 +38,17 @@ class Problem:
         cost_weight: weight of the manufacturing-cost term, degrees (0: none).
         cost_reference: reference clearance of the cost term, m.
         title: a short description for plots and reports.
+        scatter: manufacturing scatter for the robust objective, one
+            ``(name, tolerance, distribution)`` per parameter: the part's value is the
+            design's (or the base's) value plus a deviation within ``+-tolerance`` (SI),
+            ``"uniform"`` over the band or ``"normal"`` with the band as +-3 sigma
+            (:class:`jaxcrank.sweep.Tolerance`).
+        samples: number of manufactured parts the robust objective averages over
+            (0: the nominal design alone). With ``samples > 0`` the Eq. 19 part of the
+            objective is the Monte Carlo mean over ``samples`` parts, the same draws at
+            every design (common random numbers, a sample-average approximation of the
+            expected RMS error), and its gradient the mean of the parts' gradients.
+        seed: seed of those draws.
     """
 
     base: Mechanism
@@ -51,6 +62,9 @@ class Problem:
     cost_weight: float = 0.0
     cost_reference: float = 5e-4
     title: str = ""
+    scatter: tuple[tuple[str, float, str], ...] = ()
+    samples: int = 0
+    seed: int = 0
 
     def __post_init__(self):
         n = len(self.names)
@@ -70,6 +84,36 @@ class Problem:
             raise ParameterError("cost_weight > 0 needs clearance_B or clearance_C among the variables")
         if self.start is not None and len(self.start) != n:
             raise ParameterError(f"start needs {n} values")
+        self._check_scatter()
+
+    def _check_scatter(self):
+        from jaxcrank.sweep import Tolerance
+
+        if self.samples < 0:
+            raise ParameterError(f"samples = {self.samples} must be >= 0 (0: no manufacturing scatter)")
+        if self.samples and not self.scatter:
+            raise ParameterError("samples > 0 needs a scatter: [(name, tolerance, distribution), ...]")
+        for entry in self.scatter:
+            if len(entry) != 3:
+                raise ParameterError(f"scatter entry {entry!r} must be (name, tolerance, distribution)")
+            name, tol, dist = entry
+            get_parameter(self.base, name)  # raises on unknown names
+            Tolerance(0.0, float(tol), dist)  # checks tolerance >= 0 and the distribution
+            if name == "crank_speed":
+                raise ParameterError("scatter of crank_speed is not supported: the objective's sample grid "
+                                     "(equal crank angles) needs one crank speed for all parts")
+        if len({e[0] for e in self.scatter}) != len(self.scatter):
+            raise ParameterError("scatter names a parameter twice")
+        if self.samples:
+            dev = self.draws()
+            for j, (name, tol, _) in enumerate(self.scatter):
+                if name.startswith("clearance_"):
+                    lowest = (self.lower[self.names.index(name)] if name in self.names
+                              else float(get_parameter(self.base, name)))
+                    if lowest + dev[:, j].min() <= 0.0:
+                        raise ParameterError(
+                            f"scatter of {name}: +-{tol:g} m reaches a clearance <= 0 ({lowest:g} m "
+                            f"{dev[:, j].min():+g} m in the draws); valid: tolerance below the smallest clearance")
 
     # ------------------------------------------------------------------ scaling
     @property
@@ -126,6 +170,22 @@ class Problem:
         """The mechanism at SI design ``x`` (traceable)."""
         return set_parameters(self.base, self.names, x)
 
+    def draws(self) -> np.ndarray:
+        """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI."""
+        from jaxcrank.sweep import Tolerance
+
+        rng = np.random.default_rng(self.seed)
+        cols = [tol * Tolerance(0.0, tol, dist).standard(rng, self.samples) for _, tol, dist in self.scatter]
+        return np.stack(cols, axis=1) if cols else np.zeros((self.samples, 0))
+
+    def part(self, x, deviation) -> Mechanism:
+        """The manufactured part of SI design ``x`` with ``deviation`` (one row of
+        :meth:`draws`): each scattered parameter at its design (or base) value plus
+        its deviation (traceable)."""
+        mech = self.mechanism(x)
+        names = [nm for nm, _, _ in self.scatter]
+        return set_parameters(mech, names, [parameter_value(mech, nm) + deviation[j] for j, nm in enumerate(names)])
+
     def cost(self, x):
         """Manufacturing cost term, degrees: ``cost_weight * sum_j cost_reference / c_j``
         over the clearance variables (reciprocal cost-tolerance model: halving a
@@ -136,7 +196,10 @@ class Problem:
     def objective_value(self, x, method: str | None = None):
         """Total objective at SI design ``x``: Eq. 19 (degrees) + cost."""
         obj = self.objective if method is None else dataclasses.replace(self.objective, method=method)
-        return value(self.mechanism(x), obj) + self.cost(x)
+        if not self.samples:
+            return value(self.mechanism(x), obj) + self.cost(x)
+        parts = jax.vmap(lambda d: value(self.part(x, d), obj))(jnp.asarray(self.draws()))
+        return jnp.mean(parts) + self.cost(x)
 
 
 def paper_problem(objective: Objective = Objective(), start: Sequence[float] | None = None) -> Problem:
@@ -162,4 +225,20 @@ def tolerance_problem(objective: Objective = Objective(), cost_weight: float = 0
                    title="tolerance allocation: RMS error + reciprocal clearance cost")
 
 
-PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem}
+#: the robust problem's default manufacturing scatter: lengths +-0.05 mm (normal, +-3 sigma),
+#: clearances +-0.05 mm (uniform) about the preset's 0.5 mm
+ROBUST_SCATTER = (("crank_length", 5e-5, "normal"), ("rod_length", 5e-5, "normal"),
+                  ("clearance_B", 5e-5, "uniform"), ("clearance_C", 5e-5, "uniform"))
+
+
+def robust_problem(objective: Objective = Objective(), samples: int = 8, seed: int = 0,
+                   start: Sequence[float] | None = None) -> Problem:
+    """The paper's L1, L2 problem under manufacturing tolerances: minimise the
+    expected RMS transmission-angle error over ``samples`` parts drawn from
+    :data:`ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
+    p = paper_problem(objective, start)
+    return dataclasses.replace(p, scatter=ROBUST_SCATTER, samples=samples, seed=seed,
+                               title=f"robust: expected RMS transmission-angle error over {samples} parts")
+
+
+PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem, "robust": robust_problem}

@@ -3,7 +3,8 @@ the ``vmap`` grid search (ground truth for the optimiser and its gradient-free
 baseline) and the batched evaluations the 1-D scans use.
 
 Each design is one forward solve from the pins-centred start (the ``pathwise``
-Eq. 19 value, which is the objective itself) plus the cost term. Designs are
+Eq. 19 value, which is the objective itself) plus the cost term; for a robust
+problem (``Problem.samples > 0``) the mean over its manufactured parts. Designs are
 solved ``chunk`` at a time under ``vmap`` so memory stays bounded; a design whose
 solve fails is reported in ``status`` (never a silent NaN).
 """
@@ -25,9 +26,16 @@ from .problem import Problem
 
 @functools.partial(jax.jit, static_argnums=0)
 def _batch(problem: Problem, xs):
-    def one(x):
-        sq, ok = pathwise_errors(problem.mechanism(x), problem.objective)
+    def rms(mech):
+        sq, ok = pathwise_errors(mech, problem.objective)
         return jnp.sqrt(jnp.mean(sq)), ok
+
+    def one(x):
+        if not problem.samples:
+            return rms(problem.mechanism(x))
+        # robust problem: the mean over the same manufactured parts as the objective
+        values, ok = jax.vmap(lambda d: rms(problem.part(x, d)))(jnp.asarray(problem.draws()))
+        return jnp.mean(values), jnp.all(ok)
 
     return jax.vmap(one)(xs)
 
