@@ -48,13 +48,16 @@ def short_run():
     return prob, optimize(prob, Settings(max_iterations=12, learning_rate=0.2), progress=False)
 
 
-def test_ensemble_value_is_eq19_and_windows_reassemble_it(short_run):
-    prob, res = short_run
-    exact = res["f0"]  # the pathwise Eq. 19 at the start design
-    assert res["history"][0]["objective_deg"] == pytest.approx(exact, rel=1e-12)  # ensemble method's value
+def test_ensemble_value_is_eq19_and_windows_reassemble_it():
+    """Value checks within one compiled solve (eager calls share diffrax's compiled
+    solve): another compilation of the same 30 ms solve differs by ~0.2 % (impact
+    chaos amplifies last-bit rounding), as the optimiser's jitted value does."""
+    prob = paper_problem(SHORT)
     mech = prob.mechanism(jnp.asarray(prob.start))
+    exact = float(O.pathwise(mech, SHORT))
     ref, starts = O.reference(mech, SHORT)
     assert float(ref) == pytest.approx(exact, rel=1e-12)
+    assert float(O.value(mech, SHORT)) == pytest.approx(exact, rel=1e-12)  # the ensemble method's value
     # re-solving the windows from their start states (another solver) gives the same F
     assert float(O.ensemble(mech, starts, SHORT)) == pytest.approx(exact, rel=1e-3)
 
