@@ -193,13 +193,20 @@ def _is_float(x):
     return isinstance(x, float) or (isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.inexact))
 
 
-def _window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: Objective):
+def solve_window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: Objective):
+    """Window ``i`` re-solved for ``mech`` from :func:`start_state`: its sample
+    times (n_window,) s, scaled states (zero where the solve failed, so a failed
+    window is reported by the caller, not propagated as NaN) and whether it finished."""
     ts = starts.t[i] + dt * jnp.arange(n_window + 1)
     sim = simulate(mech, ts=ts, y0=start_state(mech, starts, i), solver=obj.window_solver,
                    rtol=obj.rtol, atol=obj.atol, max_steps=obj.window_max_steps, throw=False)
     ok = sim.ok & jnp.all(jnp.isfinite(sim.ys))
-    ys = jnp.where(ok, sim.ys, 0.0)  # a failed window is reported by ensemble(), not propagated as NaN
-    return jnp.sum(transmission_angle_error(mech, sim.ts[1:], ys[1:]) ** 2), ok
+    return sim.ts[1:], jnp.where(ok, sim.ys, 0.0)[1:], ok
+
+
+def _window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: Objective):
+    ts, ys, ok = solve_window(mech, starts, i, n_window, dt, obj)
+    return jnp.sum(transmission_angle_error(mech, ts, ys) ** 2), ok
 
 
 def window_gradients(mech: Mechanism, starts: Starts, obj: Objective = Objective()):

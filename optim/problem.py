@@ -20,6 +20,7 @@ import numpy as np
 import optax
 
 from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
+from jaxcrank.sweep import Tolerance, monte_carlo
 
 from .objective import Objective, value
 
@@ -87,8 +88,6 @@ class Problem:
         self._check_scatter()
 
     def _check_scatter(self):
-        from jaxcrank.sweep import Tolerance
-
         if self.samples < 0:
             raise ParameterError(f"samples = {self.samples} must be >= 0 (0: no manufacturing scatter)")
         if self.samples and not self.scatter:
@@ -171,12 +170,12 @@ class Problem:
         return set_parameters(self.base, self.names, x)
 
     def draws(self) -> np.ndarray:
-        """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI."""
-        from jaxcrank.sweep import Tolerance
-
-        rng = np.random.default_rng(self.seed)
-        cols = [tol * Tolerance(0.0, tol, dist).standard(rng, self.samples) for _, tol, dist in self.scatter]
-        return np.stack(cols, axis=1) if cols else np.zeros((self.samples, 0))
+        """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI:
+        the Monte Carlo draws of :func:`jaxcrank.sweep.monte_carlo` about a zero nominal."""
+        if not self.scatter:
+            return np.zeros((self.samples, 0))
+        tolerances = {name: Tolerance(0.0, tol, dist) for name, tol, dist in self.scatter}
+        return monte_carlo(tolerances, self.samples, seed=self.seed)[1]
 
     def part(self, x, deviation) -> Mechanism:
         """The manufactured part of SI design ``x`` with ``deviation`` (one row of

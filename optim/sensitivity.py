@@ -33,9 +33,8 @@ import numpy as np
 from jaxcrank import ideal, model
 from jaxcrank.outputs import DEG
 from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
-from jaxcrank.solve import simulate
 
-from .objective import Objective, _eval_samples, start_state, window_starts
+from .objective import Objective, _eval_samples, solve_window, window_starts
 
 #: metrics whose gradient the ensemble estimate follows (name -> meaning); units in the suffix
 METRICS = {
@@ -68,12 +67,8 @@ def window_sums(base: Mechanism, names, x, starts, i, n_window: int, dt: float, 
     carried-over start state: the sums of squared deviations over its samples,
     shape (4,), in the units of :data:`METRICS` squared, and whether it finished."""
     m = set_parameters(base, names, x)
-    ts = starts.t[i] + dt * jnp.arange(n_window + 1)
-    s = simulate(m, ts=ts, y0=start_state(m, starts, i), solver=obj.window_solver, rtol=obj.rtol,
-                 atol=obj.atol, max_steps=obj.window_max_steps, throw=False)
-    ok = s.ok & jnp.all(jnp.isfinite(s.ys))
-    ys = jnp.where(ok, s.ys, 0.0)  # a failed window is left out, not propagated as NaN
-    return jnp.sum(deviations(m, s.ts[1:], ys[1:]) ** 2, axis=0), ok
+    ts, ys, ok = solve_window(m, starts, i, n_window, dt, obj)
+    return jnp.sum(deviations(m, ts, ys) ** 2, axis=0), ok
 
 
 def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objective = Objective()) -> dict:
