@@ -43,7 +43,7 @@ from jaxcrank.params import ParameterError
 
 from .objective import Objective
 from .optimize import METHODS, Settings, optimize
-from .problem import PROBLEMS, Problem
+from .problem import PROBLEMS, Problem, robust_title
 
 PAPER_OPTIMUM_DEG = 0.097966
 GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
@@ -114,6 +114,8 @@ def build(cfg) -> tuple[Problem, Settings]:
         design = {k: (tuple(tuple(r) for r in v) if k in ("A", "scatter") else tuple(v) if isinstance(v, list) else v)
                   for k, v in design.items()}
         problem = dataclasses.replace(problem, **design)
+        if name == "robust":  # the title names the number of parts
+            problem = dataclasses.replace(problem, title=robust_title(problem.samples))
     settings = Settings(**_fields(Settings, "optimizer", cfg.get("optimizer", {})))
     return problem, settings
 

@@ -230,6 +230,11 @@ ROBUST_SCATTER = (("crank_length", 5e-5, "normal"), ("rod_length", 5e-5, "normal
                   ("clearance_B", 5e-5, "uniform"), ("clearance_C", 5e-5, "uniform"))
 
 
+def robust_title(samples: int) -> str:
+    """Title of the robust problem with ``samples`` parts (reports and plots)."""
+    return f"robust: expected RMS transmission-angle error over {samples} parts"
+
+
 def robust_problem(objective: Objective = Objective(), samples: int = 8, seed: int = 0,
                    start: Sequence[float] | None = None) -> Problem:
     """The paper's L1, L2 problem under manufacturing tolerances: minimise the
@@ -237,7 +242,7 @@ def robust_problem(objective: Objective = Objective(), samples: int = 8, seed: i
     :data:`ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
     p = paper_problem(objective, start)
     return dataclasses.replace(p, scatter=ROBUST_SCATTER, samples=samples, seed=seed,
-                               title=f"robust: expected RMS transmission-angle error over {samples} parts")
+                               title=robust_title(samples))
 
 
 PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem, "robust": robust_problem}
