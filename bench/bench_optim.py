@@ -35,7 +35,7 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=Path("bench/results/optim.json"))
     args = ap.parse_args(argv)
     prob = paper_problem(Objective(t_end=args.t_end))
-    out = {"problem": prob.title, "t_end_s": args.t_end, "cpu_devices": jax.device_count(),
+    out = {"problem": prob.description, "t_end_s": args.t_end, "cpu_devices": jax.device_count(),
            "start": list(prob.start)}
 
     tic = time.perf_counter()

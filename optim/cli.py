@@ -43,7 +43,7 @@ from jaxcrank.params import ParameterError
 
 from .objective import Objective
 from .optimize import METHODS, Settings, optimize
-from .problem import PROBLEMS, Problem, robust_title
+from .problem import PROBLEMS, Problem
 
 PAPER_OPTIMUM_DEG = 0.097966
 GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
@@ -114,8 +114,6 @@ def build(cfg) -> tuple[Problem, Settings]:
         design = {k: (tuple(tuple(r) for r in v) if k in ("A", "scatter") else tuple(v) if isinstance(v, list) else v)
                   for k, v in design.items()}
         problem = dataclasses.replace(problem, **design)
-        if name == "robust":  # the title names the number of parts
-            problem = dataclasses.replace(problem, title=robust_title(problem.samples))
     settings = Settings(**_fields(Settings, "optimizer", cfg.get("optimizer", {})))
     return problem, settings
 
@@ -154,7 +152,7 @@ def run(args) -> int:
     res = optimize(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
     wall = time.perf_counter() - tic
     hist = res["history"]
-    plots.plot_history(hist, out / "history.png", title=problem.title)
+    plots.plot_history(hist, out / "history.png", title=problem.description)
 
     grid_info = None
     if args.grid and problem.n == 2:
@@ -162,7 +160,7 @@ def run(args) -> int:
         grid = search.grid_search(problem, n=args.grid, chunk=GRID_CHUNK, progress=not args.quiet, errors=errors)
         search.write_grid(out / "grid.csv", problem, grid)
         path = [[h[f"{n}_SI"] for n in problem.names] for h in hist]
-        plots.plot_landscape(grid, problem.names, path, out / "landscape.png", title=problem.title,
+        plots.plot_landscape(grid, problem.names, path, out / "landscape.png", title=problem.description,
                              final=res["final"])
         # the grid's evaluator at the final design: the same compiled solve as the grid (a
         # differently compiled solve of the same design differs by ~0.5 %: impact chaos
@@ -177,7 +175,7 @@ def run(args) -> int:
 
     f_start = hist[0]["objective_deg"]
     result = {
-        "problem": problem.title, "names": list(problem.names), "method": settings.method,
+        "problem": problem.description, "names": list(problem.names), "method": settings.method,
         "converged": res["converged"], "iterations": len(hist),
         "start_design_SI": [hist[0][f"{n}_SI"] for n in problem.names], "start_objective_deg": f_start,
         "final_design_SI": res["final"], "final_objective_deg": res["final_objective"],
@@ -192,7 +190,7 @@ def run(args) -> int:
                       "itself is Eq. 19 in degrees.")},
     }
     (out / "result.json").write_text(json.dumps(result, indent=2))
-    print(f"{problem.title}: {f_start:.5f} -> {res['final_objective']:.5f} deg "
+    print(f"{problem.description}: {f_start:.5f} -> {res['final_objective']:.5f} deg "
           f"({result['reduction_percent']:.2f} % lower) at "
           + ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, res["final"]))
           + (f"; grid best {grid_info['best_objective_deg']:.5f} deg" if grid_info else ""))

@@ -38,7 +38,7 @@ class Problem:
         objective: settings of the Eq. 19 objective.
         cost_weight: weight of the manufacturing-cost term, degrees (0: none).
         cost_reference: reference clearance of the cost term, m.
-        title: a short description for plots and reports.
+        title: a short description for plots and reports (see :attr:`description`).
         scatter: manufacturing scatter for the robust objective, one
             ``(name, tolerance, distribution)`` per parameter: the part's value is the
             design's (or the base's) value plus a deviation within ``+-tolerance`` (SI),
@@ -113,6 +113,12 @@ class Problem:
                         raise ParameterError(
                             f"scatter of {name}: +-{tol:g} m reaches a clearance <= 0 ({lowest:g} m "
                             f"{dev[:, j].min():+g} m in the draws); valid: tolerance below the smallest clearance")
+
+    @property
+    def description(self) -> str:
+        """``title`` for reports and plots, naming the number of manufactured parts
+        when the objective is a mean over them (``samples > 0``)."""
+        return f"{self.title} (mean over {self.samples} manufactured parts)" if self.samples else self.title
 
     # ------------------------------------------------------------------ scaling
     @property
@@ -230,11 +236,6 @@ ROBUST_SCATTER = (("crank_length", 5e-5, "normal"), ("rod_length", 5e-5, "normal
                   ("clearance_B", 5e-5, "uniform"), ("clearance_C", 5e-5, "uniform"))
 
 
-def robust_title(samples: int) -> str:
-    """Title of the robust problem with ``samples`` parts (reports and plots)."""
-    return f"robust: expected RMS transmission-angle error over {samples} parts"
-
-
 def robust_problem(objective: Objective = Objective(), samples: int = 8, seed: int = 0,
                    start: Sequence[float] | None = None) -> Problem:
     """The paper's L1, L2 problem under manufacturing tolerances: minimise the
@@ -242,7 +243,7 @@ def robust_problem(objective: Objective = Objective(), samples: int = 8, seed: i
     :data:`ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
     p = paper_problem(objective, start)
     return dataclasses.replace(p, scatter=ROBUST_SCATTER, samples=samples, seed=seed,
-                               title=robust_title(samples))
+                               title="robust: expected RMS transmission-angle error")
 
 
 PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem, "robust": robust_problem}

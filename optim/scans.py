@@ -69,7 +69,7 @@ def run(problem: Problem, out: Path, points=21, fine_points=41, half_width=2e-3,
         pathwise_gradient=True, progress=True):
     out.mkdir(parents=True, exist_ok=True)
     x0 = np.asarray(problem.from_unit(problem.start_unit()))
-    rows, report = [], {"problem": problem.title, "start": x0.tolist(), "names": list(problem.names),
+    rows, report = [], {"problem": problem.description, "start": x0.tolist(), "names": list(problem.names),
                         "objective": dataclasses.asdict(problem.objective), "variables": {}}
     tic = time.perf_counter()
     for i, name in enumerate(problem.names):

@@ -184,7 +184,7 @@ def test_robust_problem_config_round_trip():
     problem, settings = build({"problem": "robust", "design": {
         "samples": 2, "seed": 7, "scatter": [["rod_length", 1e-4, "normal"], ["clearance_B", 5e-5, "uniform"]]}})
     assert problem.samples == 2 and problem.scatter[0] == ("rod_length", 1e-4, "normal")
-    assert "over 2 parts" in problem.title
+    assert "over 2 manufactured parts" in problem.description
     again, _ = build(resolved(problem, settings, "robust"))
     assert again.scatter == problem.scatter and (again.samples, again.seed) == (2, 7)
     np.testing.assert_array_equal(again.draws(), problem.draws())
