@@ -75,14 +75,19 @@ def trajectory(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(cols[k]) for k in COLUMNS}
 
 
+def transmission_angle_deviation(rod_angle, ideal_rod_angle):
+    """Actual minus ideal transmission angle, degrees, from the actual and ideal rod
+    angles theta2 (rad, any matching shapes) at the same crank angle."""
+    return (ideal.transmission_angle(rod_angle) - ideal.transmission_angle(ideal_rod_angle)) * DEG
+
+
 def transmission_angle_error(mech, ts, ys):
     """Actual minus ideal transmission angle at sample times ``ts`` (s) with scaled
     states ``ys``, degrees; compared at the same time, i.e. the same crank angle."""
     def one(t, y):
-        actual = model.evaluate(mech, t, y).q[2]
-        return ideal.transmission_angle(actual) - ideal.transmission_angle(ideal.positions(mech, t)[2])
+        return transmission_angle_deviation(model.evaluate(mech, t, y).q[2], ideal.positions(mech, t)[2])
 
-    return jax.vmap(one)(ts, ys) * DEG
+    return jax.vmap(one)(ts, ys)
 
 
 def rms_transmission_error(sim: Simulation, t_start=None):

@@ -41,8 +41,8 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 from tqdm.auto import tqdm
 
-from . import config, ideal
-from .outputs import DEG, frames
+from . import config
+from .outputs import frames, transmission_angle_deviation
 from .params import Mechanism, ParameterError, get_parameter, parameter_unit, set_parameters
 from .solve import SOLVERS, simulate
 
@@ -121,7 +121,7 @@ def headline(sim, t_start) -> dict[str, jax.Array]:
     def rms(x):
         return jnp.sqrt(jnp.sum(jnp.where(late, x**2, 0.0)) / n)
 
-    ta = (ideal.transmission_angle(f.q[:, 2]) - ideal.transmission_angle(f.ideal_q[:, 2])) * DEG
+    ta = transmission_angle_deviation(f.q[:, 2], f.ideal_q[:, 2])
     return {
         "max_abs_rod_x_deviation_m": peak(f.q[:, 0] - f.ideal_q[:, 0]),
         "max_abs_slider_x_deviation_m": peak(f.q[:, 3] - f.ideal_q[:, 3]),

@@ -30,8 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxcrank import ideal, model
-from jaxcrank.outputs import DEG
+from jaxcrank import model
+from jaxcrank.outputs import transmission_angle_deviation
 from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
 
 from .objective import Objective, _eval_samples, solve_window, window_starts
@@ -55,9 +55,8 @@ def deviations(mech: Mechanism, ts, ys):
     and units of :data:`METRICS` (deg, m, m, N m)."""
     def one(t, y):
         f = model.evaluate(mech, t, y)
-        ta = (ideal.transmission_angle(f.q[2]) - ideal.transmission_angle(f.ideal_q[2])) * DEG
-        return jnp.stack([ta, f.q[0] - f.ideal_q[0], f.q[3] - f.ideal_q[3],
-                          f.driving_moment - f.ideal_driving_moment])
+        return jnp.stack([transmission_angle_deviation(f.q[2], f.ideal_q[2]), f.q[0] - f.ideal_q[0],
+                          f.q[3] - f.ideal_q[3], f.driving_moment - f.ideal_driving_moment])
 
     return jax.vmap(one)(ts, ys)
 
