@@ -3,8 +3,9 @@
     python bench/bench_solvers.py [--t1 0.4] [--window 0.02] [--out bench/results/solvers.json]
 
 Measures, on this machine's CPU:
-- the paper run (``--t1`` s, default 0.4) with the default solver: compile time,
-  wall time after compile, steps, headline metrics;
+- the paper run (``--t1`` s, default 0.4) with the default solver and with the
+  ``--implicit`` one (default rodas4): compile time, wall time after compile, steps,
+  headline metrics;
 - on a shorter ``--window`` (default 0.02 s, the slow baselines would take
   minutes on the full run): every diffrax solver and scipy's LSODA and Radau
   (with the jitted Jacobian) on the same jitted vector field at the same
@@ -92,7 +93,8 @@ def main():
     p.add_argument("--t1", type=float, default=0.4)
     p.add_argument("--window", type=float, default=0.02)
     p.add_argument("--tol", type=float, default=1e-6)
-    p.add_argument("--solvers", default="tsit5,dopri5,kvaerno5")
+    p.add_argument("--solvers", default="tsit5,dopri5,rodas4,kvaerno5")
+    p.add_argument("--implicit", default="rodas4", help="implicit solver also timed on the paper run")
     p.add_argument("--scipy", default="LSODA,Radau")
     p.add_argument("--out", type=Path, default=Path("bench/results/solvers.json"))
     args = p.parse_args()
@@ -103,6 +105,10 @@ def main():
     print(f"paper run, {args.t1} s, default solver {solve.DEFAULT_SOLVER} ...", flush=True)
     report["paper_run"] = jax_run(mech, args.t1, solve.DEFAULT_SOLVER, args.tol, int(args.t1 * 36000) + 1)
     print(json.dumps(report["paper_run"], indent=1), flush=True)
+    if args.implicit:
+        print(f"paper run, {args.t1} s, {args.implicit} ...", flush=True)
+        report["paper_run_implicit"] = jax_run(mech, args.t1, args.implicit, args.tol, int(args.t1 * 36000) + 1)
+        print(json.dumps(report["paper_run_implicit"], indent=1), flush=True)
     window = []
     n = int(args.window * 36000) + 1
     for name in args.solvers.split(","):

@@ -3,7 +3,8 @@ an explicit and an implicit window solver, and whether the largest ones are real
 (checked against central differences of that window at the same tolerance and
 against reverse mode at rtol = atol = 1e-9).
 
-    python bench/window_gradients.py                        # tsit5 and kvaerno5, all 100 windows
+    python bench/window_gradients.py                        # tsit5, rodas4 and kvaerno5, all 100 windows
+    python bench/window_gradients.py --solvers rodas4 --merge   # one solver, keep the others' entries
     python bench/window_gradients.py --solvers tsit5 --window 5e-4
 
 Writes bench/results/window_gradients.json: per solver the ensemble gradient
@@ -32,12 +33,17 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--design", type=float, nargs=2, default=[0.12, 0.40], help="L1 L2, m")
     ap.add_argument("--window", type=float, default=2e-3, help="window length, s")
-    ap.add_argument("--solvers", nargs="+", default=["tsit5", "kvaerno5"])
+    ap.add_argument("--solvers", nargs="+", default=["tsit5", "rodas4", "kvaerno5"])
+    ap.add_argument("--merge", action="store_true", help="keep the other solvers' entries of an existing --out file")
     ap.add_argument("--check", type=int, default=3, help="largest windows to check")
     ap.add_argument("--out", type=Path, default=Path("bench/results/window_gradients.json"))
     args = ap.parse_args(argv)
     x0 = jnp.asarray(args.design)
     report = {"design_m": args.design, "window_s": args.window, "solvers": {}}
+    if args.merge and args.out.exists():
+        old = json.loads(args.out.read_text())
+        if old["design_m"] == args.design and old["window_s"] == args.window:
+            report["solvers"] = old["solvers"]
     for solver in args.solvers:
         obj = O.Objective(window=args.window, windows=0, window_solver=solver, window_max_steps=50_000)
         prob = paper_problem(obj)

@@ -19,12 +19,14 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from . import model
+from .rosenbrock import Rodas4
 from .params import Mechanism
 
 SOLVERS = {
     "kvaerno5": diffrax.Kvaerno5,
     "kvaerno4": diffrax.Kvaerno4,
     "kvaerno3": diffrax.Kvaerno3,
+    "rodas4": Rodas4,
     "tsit5": diffrax.Tsit5,
     "dopri5": diffrax.Dopri5,
     "dopri8": diffrax.Dopri8,

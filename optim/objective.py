@@ -57,11 +57,14 @@ class Objective(eqx.Module):
         window_max_steps: step budget of each window (accepted + rejected); a
             window that exceeds it is left out of the ensemble (under ``vmap`` every
             window waits for the slowest, so one stuck window costs the whole budget).
-        window_solver: solver of the ensemble windows. An L-stable implicit solver:
-            an explicit one's step sequence sits at its stability limit in stick
+        window_solver: solver of the ensemble windows. An L-stable one: an
+            explicit solver's step sequence sits at its stability limit in stick
             phases (friction ramp) and the derivative of its discrete solution then
             blows up in about 1 % of windows (README, "Design optimisation";
-            ``bench/window_gradients.py``).
+            ``bench/window_gradients.py``). Default ``kvaerno5``; the linearly
+            implicit ``rodas4`` gives the same gradients at rtol 1e-6 in about half
+            the time but its reverse mode is less exact at tight tolerances
+            (README, "Design optimisation").
         rtol, atol: solver tolerances on the scaled state.
         max_steps: step budget of the long solve.
     """
