@@ -116,7 +116,8 @@ def test_ensemble_gradient_with_the_default_implicit_solver_matches_central_diff
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="known limit (README): rodas4's reverse mode missed central differences by 3.9e-4 at rtol 1e-8")
+                   reason="known limit (README): reverse mode holds rodas4's adaptive step sizes fixed; "
+                          "it missed central differences by 3.9e-4 at rtol 1e-8")
 def test_ensemble_gradient_with_rodas4_matches_central_differences():
     _estimator_matches_central_differences(
         O.Objective(t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-8, atol=1e-8, window_max_steps=50_000,
