@@ -64,7 +64,7 @@ def test_l_stable_on_a_stiff_problem():
 def test_agrees_with_tsit5_on_the_paper_mechanism(paper):
     """First 5 ms of the paper run (the start-up impacts at both pins): Rodas4 and
     tsit5 at rtol = atol = 1e-8 give the same slider and rod motion to within
-    1e-9 m (1e-5 of the 0.1 mm clearance)."""
+    1e-9 m (2e-6 of the 0.5 mm clearance)."""
     cols = [outputs.trajectory(jc.simulate(paper, 0.005, n_samples=181, solver=s, rtol=1e-8, atol=1e-8))
             for s in ("rodas4", "tsit5")]
     for name in ("slider_x", "rod_x"):
