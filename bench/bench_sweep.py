@@ -20,8 +20,9 @@ Measured in one run, on this machine's CPU:
 Each entry has the compile time (first chunk, minus a chunk's run time), the wall
 time of all designs after compilation and designs per second. Writes one JSON
 file; nothing is asserted. Runs on whatever JAX's default backend is: on a GPU
-machine, e.g. ``--designs 2048 --batch-sizes 256,2048 --devices 1 --loop-designs 2``
-(a batch needs hundreds of designs there; single solves are slower than on a CPU).
+machine, e.g. ``--designs 2048 --batch-sizes 2048 --devices 1 --loop-designs 1``
+(a batch needs thousands of designs there, and a single solve is ~20x slower than
+on a CPU, so the loop baseline gets one design).
 """
 
 from __future__ import annotations
