@@ -2,6 +2,9 @@
 
 import jax
 
+from . import runtime
+
+runtime.configure()  # before anything starts JAX's backend: XLA reads XLA_FLAGS once
 jax.config.update("jax_enable_x64", True)
 
 from . import ideal, laws, model  # noqa: E402

@@ -187,8 +187,10 @@ def _versions():
     import jax
     import numpy
 
+    from . import runtime
+
     return {"python": platform.python_version(), "jax": jax.__version__, "diffrax": diffrax.__version__,
-            "equinox": equinox.__version__, "numpy": numpy.__version__}
+            "equinox": equinox.__version__, "numpy": numpy.__version__, "xla": runtime.describe()}
 
 
 def main(argv=None) -> int:
