@@ -1,7 +1,8 @@
 """Benchmark: sweep throughput (designs per second) against a plain Python loop.
 
     python bench/bench_sweep.py [--designs 16] [--batch-sizes 1,2,4,8,16] [--devices 1,2]
-                                [--revolutions 4] [--loop-designs N] [--out bench/results/sweep.json]
+                                [--workers 2] [--revolutions 4] [--loop-designs N]
+                                [--out bench/results/sweep.json]
 
 The workload is a Monte Carlo of the paper design (clearances at B and C within
 +-0.05 mm, uniform), each part simulated as ``jaxcrank sweep`` does
@@ -12,14 +13,16 @@ Measured in one run, on this machine's CPU:
 - ``loop``: a Python loop over the designs, each one call of the same jitted
   single-design function (:func:`jaxcrank.sweep.simulate_design`), the baseline;
 - ``batch``: :func:`jaxcrank.sweep.run` with ``chunk`` = each batch size on one
-  device (one ``vmap`` per chunk);
+  device (chunk 1: each design solved alone; larger: one ``vmap`` per chunk);
 - ``devices``: the largest batch size on 1, 2, ... host devices (each count in a
   fresh process with ``--xla_force_host_platform_device_count``; the sweep shards
-  every chunk over all devices).
+  every chunk over all devices);
+- ``workers``: ``sweep.run(..., chunk=1, workers=N)``: N local processes.
 
-Each entry has the compile time (first chunk, minus a chunk's run time), the wall
-time of all designs after compilation and designs per second. Writes one JSON
-file; nothing is asserted. Runs on whatever JAX's default backend is: on a GPU
+Each entry has the wall time of all designs end to end (the first call: start-up
+and compilation included) and after compilation (a second call; with workers, whose
+processes end with each call, the time after every worker has finished one design),
+with designs per second for both. Writes one JSON file; nothing is asserted. Runs on whatever JAX's default backend is: on a GPU
 machine, e.g. ``--designs 2048 --batch-sizes 2048 --devices 1 --loop-designs 1``
 (a batch needs thousands of designs there, and a single solve is ~20x slower than
 on a CPU, so the loop baseline gets one design).
@@ -71,32 +74,56 @@ def loop(n, revolutions):
     settings = _settings(revolutions)
     base = jc.paper()
     one = jax.jit(lambda x: sweep.simulate_design(base, names, x, settings))
-    _, first = _timed(lambda: jax.block_until_ready(one(xs[0])))
+    _, first = _timed(lambda: [jax.block_until_ready(one(x)) for x in xs])
     _, wall = _timed(lambda: [jax.block_until_ready(one(x)) for x in xs])
-    per = wall / n
-    return {"mode": "loop", "batch": 1, "devices": 1, "designs": n, "compile_s": max(first - per, 0.0),
-            "wall_s": wall, "designs_per_s": n / wall}
+    return _entry("loop", 1, 1, 1, n, first, wall)
 
 
-def batched(n, batch, revolutions):
+def _entry(mode, batch, devices, workers, n, end_to_end, wall=None, failed=0):
+    return {"mode": mode, "batch": batch, "devices": devices, "workers": workers, "designs": n,
+            "end_to_end_s": end_to_end, "end_to_end_designs_per_s": n / end_to_end,
+            "compile_s": None if wall is None else max(end_to_end - wall, 0.0), "wall_s": wall,
+            "designs_per_s": None if wall is None else n / wall, "failed": failed}
+
+
+def batched(n, batch, revolutions, workers=1):
     jax, jc, sweep = _setup()
     names, xs = _designs(n)
     settings = _settings(revolutions)
     base = jc.paper()
     chunk = max(batch, jax.device_count())
-    # first chunk: compilation + one chunk; then every design with the compiled code
-    table, first = _timed(lambda: sweep.run(base, names, xs[:chunk], settings, chunk=chunk, progress=False))
-    table, wall = _timed(lambda: sweep.run(base, names, xs, settings, chunk=chunk, progress=False))
-    per_chunk = wall * chunk / n
-    return {"mode": "batch", "batch": chunk, "devices": jax.device_count(), "designs": n,
-            "compile_s": max(first - per_chunk, 0.0), "wall_s": wall, "designs_per_s": n / wall,
-            "failed": int(sum(s != "ok" for s in table["status"]))}
+    if workers > 1:
+        return _workers(jc.paper(), names, xs, settings, workers)
+    run = lambda: sweep.run(base, names, xs, settings, chunk=chunk, progress=False)  # noqa: E731
+    table, first = _timed(run)
+    wall = _timed(run)[1]
+    failed = int(sum(s != "ok" for s in table["status"]))
+    return _entry("batch", chunk, jax.device_count(), 1, n, first, wall, failed)
+
+
+def _workers(base, names, xs, settings, workers):
+    """``sweep.run(..., chunk=1, workers=N)``'s pool, each design's completion
+    timestamped: after compilation = the designs finished after every worker's first
+    one, over the time they took (worker start-up and compilation excluded)."""
+    _, _, sweep = _setup()
+    stamps = []
+    chunks = [([i], xs[i:i + 1]) for i in range(len(xs))]
+    start = time.perf_counter()
+    sweep._run_in_workers(base, names, settings, chunks, workers, lambda idx, result: stamps.append(time.perf_counter()))
+    n = len(xs)
+    warm = stamps[workers - 1]
+    wall = (stamps[-1] - warm) * n / (n - workers)
+    entry = _entry("workers", 1, 1, workers, n, stamps[-1] - start, wall)
+    entry["note"] = ("wall_s: time from the moment every worker had finished one design (compiled) to the "
+                     "last design, scaled to all designs")
+    return entry
 
 
 def _child(args):
     """Run one measurement in a fresh process (device count is fixed at JAX start-up)."""
     cmd = [sys.executable, __file__, "--child", args["mode"], "--designs", str(args["designs"]),
-           "--batch-sizes", str(args["batch"]), "--revolutions", str(args["revolutions"])]
+           "--batch-sizes", str(args["batch"]), "--revolutions", str(args["revolutions"]),
+           "--workers", str(args.get("workers", 1))]
     env = dict(os.environ)
     flags = env.get("XLA_FLAGS", "")
     env["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={args['devices']}".strip()
@@ -111,34 +138,44 @@ def main(argv=None):
     p.add_argument("--designs", type=int, default=16, help="designs per measurement (default 16)")
     p.add_argument("--batch-sizes", default="1,2,4,8,16", help="comma-separated vmap chunk sizes")
     p.add_argument("--devices", default="1,2", help="comma-separated host device counts")
+    p.add_argument("--workers", default="2", help="comma-separated local worker-process counts (chunk 1)")
     p.add_argument("--revolutions", type=float, default=4.0, help="crank revolutions per design (default 4)")
     p.add_argument("--loop-designs", type=int, help="designs in the Python-loop baseline (default: --designs)")
     p.add_argument("--out", type=Path, default=Path("bench/results/sweep.json"))
     p.add_argument("--child", choices=["loop", "batch"], help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.child:
-        res = loop(a.designs, a.revolutions) if a.child == "loop" else batched(a.designs, int(a.batch_sizes),
-                                                                                 a.revolutions)
+        res = loop(a.designs, a.revolutions) if a.child == "loop" else batched(
+            a.designs, int(a.batch_sizes), a.revolutions, int(a.workers))
         print(json.dumps(res))
         return 0
 
     batches = [int(b) for b in a.batch_sizes.split(",")]
     devices = [int(d) for d in a.devices.split(",")]
     common = {"designs": a.designs, "revolutions": a.revolutions}
+    def show(label, r):
+        after = "" if r["designs_per_s"] is None else f"{r['designs_per_s']:.3f} designs/s after compile, "
+        print(f"{label}: {after}{r['end_to_end_designs_per_s']:.3f} end to end", flush=True)
+
     runs = [_child({"mode": "loop", "batch": 1, "devices": 1, **common,
                     "designs": a.loop_designs or a.designs})]
-    print(f"loop: {runs[-1]['designs_per_s']:.3f} designs/s", flush=True)
+    show("loop", runs[-1])
     for b in batches:
         runs.append(_child({"mode": "batch", "batch": b, "devices": 1, **common}))
-        print(f"batch {b}, 1 device: {runs[-1]['designs_per_s']:.3f} designs/s", flush=True)
+        show(f"chunk {b}, 1 device", runs[-1])
     for d in devices:
         if d == 1:
             continue
         runs.append(_child({"mode": "batch", "batch": max(batches), "devices": d, **common}))
-        print(f"batch {max(batches)}, {d} devices: {runs[-1]['designs_per_s']:.3f} designs/s", flush=True)
-    base = runs[0]["designs_per_s"]
+        show(f"chunk {max(batches)}, {d} devices", runs[-1])
+    for w in [int(w) for w in a.workers.split(",") if w.strip()]:
+        runs.append(_child({"mode": "batch", "batch": 1, "devices": 1, "workers": w, **common}))
+        show(f"chunk 1, {w} workers", runs[-1])
+    base = runs[0]
     for r in runs:
-        r["speedup_vs_loop"] = r["designs_per_s"] / base
+        r["end_to_end_vs_loop"] = r["end_to_end_designs_per_s"] / base["end_to_end_designs_per_s"]
+        if r["designs_per_s"] is not None:
+            r["after_compile_vs_loop"] = r["designs_per_s"] / base["designs_per_s"]
     import jax
 
     report = {"machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
@@ -147,11 +184,12 @@ def main(argv=None):
               "workload": "Monte Carlo of the paper design, clearances B and C 0.5 +- 0.05 mm (uniform); "
                           f"{a.revolutions:g} revolutions at 600 rpm, tsit5, rtol = atol = 1e-6",
               "target_designs_per_s": 5.0, "runs": runs,
-              "best": max(runs, key=lambda r: r["designs_per_s"])}
+              "best_end_to_end": max(runs, key=lambda r: r["end_to_end_designs_per_s"])}
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(report, indent=2))
-    print(f"wrote {a.out}; best {report['best']['designs_per_s']:.3f} designs/s "
-          f"(batch {report['best']['batch']}, {report['best']['devices']} devices)")
+    best = report["best_end_to_end"]
+    print(f"wrote {a.out}; best end to end {best['end_to_end_designs_per_s']:.3f} designs/s "
+          f"(chunk {best['batch']}, {best['devices']} devices, {best['workers']} workers)")
     return 0
 
 

@@ -112,7 +112,8 @@ TOML spec (SI units; every key but [parameters] optional):
   samples = 64         # lhs, random, monte_carlo: number of designs
   points = 11          # oat: points per line
   seed = 0             # lhs, random, monte_carlo
-  chunk = 16           # designs per vmap batch (and per checkpoint)
+  chunk = 1            # designs solved together (and per checkpoint); default 1 per device on a
+                       # CPU (each solved alone), 1024 per device on a GPU (vmap batches)
   metrics = ["max_abs_slider_x_deviation_m", "peak_contact_force_C_N"]  # plotted (all are computed)
 
   [parameters.clearance_B]          # any parameter: clearance_B, rod_length, contact.restitution, ...
@@ -124,14 +125,14 @@ TOML spec (SI units; every key but [parameters] optional):
                        # solver = "tsit5", rtol = 1e-6, atol = 1e-6, max_steps = 500000
   [mechanism]          # the base mechanism, as in `jaxcrank simulate`'s config.toml
 
-Several devices: every local device is used (CPU: JAX_NUM_CPU_DEVICES=N); several
-processes: see README, "Sweeps on a cluster".
+Several CPU cores: --workers N (N local processes). Several devices: every local
+device is used (a GPU machine's GPUs). Several machines: see README, "Sweeps on a cluster".
 """
 
 
 def _sweep_parser(sub):
     p = sub.add_parser(
-        "sweep", help="simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo) with vmap",
+        "sweep", help="simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo), alone or in vmap batches",
         description="Run a sweep over mechanism parameters and write table.csv (one row per design: "
                     "parameters, status, headline metrics), summary.json and figures/ into --out.",
         epilog=SWEEP_SPEC_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -144,6 +145,8 @@ def _sweep_parser(sub):
     p.add_argument("--coordinator", metavar="HOST:PORT", help="address of process 0 (implies --distributed)")
     p.add_argument("--num-processes", type=int, help="processes in the job (with --coordinator)")
     p.add_argument("--process-id", type=int, help="this process's rank, 0 .. num-processes - 1 (with --coordinator)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="local processes solving designs in parallel, e.g. one per CPU core (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -163,13 +166,14 @@ def run_sweep(args) -> int:
         (out / "spec.toml").write_text(args.spec.read_text())
     start = time.perf_counter()
     table = sweep.run(spec.base, spec.names, spec.designs, spec.settings, out=out, resume=args.resume,
-                      chunk=spec.chunk, progress=not args.quiet)
+                      chunk=spec.chunk, workers=args.workers, progress=not args.quiet)
     wall = time.perf_counter() - start
     if jax.process_index() != 0:
         return 0
     summary = sweep.summarize(table)
     summary.update({"sampling": spec.sampling, "parameters": spec.names, "wall_time_s_this_call": wall,
-                    "devices": jax.device_count(), "processes": jax.process_count(),
+                    "devices": jax.device_count(), "processes": jax.process_count(), "workers": args.workers,
+                    "chunk": spec.chunk if spec.chunk is not None else sweep.default_chunk(),
                     "settings": dataclasses.asdict(spec.settings), "versions": _versions(),
                     "metric_meanings": sweep.METRICS})
     (out / "summary.json").write_text(json.dumps(summary, indent=2))

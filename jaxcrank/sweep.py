@@ -1,4 +1,4 @@
-"""Sweeps: many designs of one mechanism, simulated in ``vmap`` batches.
+"""Sweeps: many designs of one mechanism, one at a time or in ``vmap`` batches.
 
 A sweep is a table of designs over named parameters (any name
 :func:`jaxcrank.params.set_parameter` accepts: ``rod_length``,
@@ -8,16 +8,34 @@ A sweep is a table of designs over named parameters (any name
 
 - each design is checked on the host first (an invalid one, e.g. a
   non-assemblable geometry, gets ``status = "invalid"`` and the parameter error as
-  its message) and then solved with ``throw=False`` inside a ``vmap`` batch of
-  ``chunk`` designs, so memory stays bounded; a failed solve is reported in the
+  its message) and then solved with ``throw=False``, ``chunk`` designs at a time: a
+  device given one design solves it alone, a device given several solves them in a
+  ``vmap`` batch (memory stays bounded either way); a failed solve is reported in the
   ``status`` column (``max_steps``, ``solver_failed``, ``non_finite``) and its
   metric cells are left empty, never NaN;
 - the table (``table.csv``, one row per design: index, parameters, status,
   headline metrics with their units in the column names) is appended after every
   batch, so a killed sweep resumed with ``resume=True`` only solves what is missing;
-- a batch is a ``jax.Array`` sharded over every device of every process of a
-  ``jax.distributed`` job; each device solves its shard with its own ``vmap`` of
-  the solver's while loop (no per-step collective; see :func:`_evaluate`).
+- a chunk is a ``jax.Array`` sharded over every device of every process of a
+  ``jax.distributed`` job; each device solves its shard with its own compiled solve
+  (no per-step collective; see :func:`_evaluate`);
+- ``workers = N`` solves chunks in N local processes (one per CPU core), the way to
+  use several cores of one machine: XLA compiles the solver loop into one
+  single-threaded kernel (:mod:`jaxcrank.runtime`), and several host devices in one
+  process do not run at the same time.
+
+Which chunk is fastest depends on the device (``bench/bench_sweep.py``): on a CPU a
+design solved alone (``chunk = 1`` per device, the default there) beats any ``vmap``
+batch, which steps every member until the slowest one finishes and selects each
+update per member; a GPU needs batches of thousands (default 1024 per device).
+
+Reproducibility: a design's numbers do not depend on its batch mates, its position
+in the batch, the batch size (>= 2), the number of devices, processes or workers
+(with :mod:`jaxcrank.runtime`'s XLA options: no FMA contraction, which otherwise
+rounds differently per lane and batch size). Solving alone (one design per device)
+and in a batch are two compiled programs that round differently in the last bit,
+which impact chaos amplifies (1e-5..1e-3 relative after 3 ms): a resumed sweep must
+keep its chunk per device on the same side of that line.
 
 The headline metrics are :data:`METRICS` (after the first revolution by default),
 the same numbers ``jaxcrank simulate`` writes to ``summary.json``.
@@ -30,7 +48,9 @@ import dataclasses
 import functools
 import itertools
 import math
+import multiprocessing
 import os
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -247,15 +267,30 @@ def _mesh():
 
 
 @functools.lru_cache(maxsize=16)
-def _batch_fn(names: tuple[str, ...], settings: Settings):
-    def batch(base, xs):
-        m, status, steps = jax.vmap(lambda x: simulate_design(base, names, x, settings))(xs)
-        return jnp.stack([m[k] for k in METRICS], axis=1), status, steps
+def _batch_fn(names: tuple[str, ...], settings: Settings, batched: bool):
+    """The compiled solve of a device's shard: a ``vmap`` over its rows, or (``batched``
+    False, a one-row shard) the single design's solve without a batch dimension, which
+    on a CPU runs ~2.5x faster than a batch per design (``bench/bench_sweep.py``)."""
+    def one(base, x):
+        m, status, steps = simulate_design(base, names, x, settings)
+        return jnp.stack([m[k] for k in METRICS]), status, steps
+
+    def shard(base, xs):
+        if batched:
+            return jax.vmap(lambda x: one(base, x))(xs)
+        return jax.tree_util.tree_map(lambda a: a[None], one(base, xs[0]))
 
     # filter_jit: the base's Python-float parameters are compile-time constants (only
     # the swept ones are traced), which XLA folds into the vector field: 1.3x faster
     # per solver step than tracing every parameter (measured, batch of 8 designs).
-    return eqx.filter_jit(batch)
+    return eqx.filter_jit(shard)
+
+
+def default_chunk() -> int:
+    """Designs per chunk when none is given: one per device on a CPU (solved alone),
+    1024 per device elsewhere (a GPU needs large batches)."""
+    per_device = 1 if jax.default_backend() == "cpu" else 1024
+    return per_device * jax.device_count()
 
 
 def _evaluate(base, names, settings, xs):
@@ -264,14 +299,14 @@ def _evaluate(base, names, settings, xs):
 
     The batch is a ``jax.Array`` sharded over all devices of all processes
     (``NamedSharding`` over a 1-D mesh); each addressable shard is solved by the
-    same compiled ``vmap`` executable on its own device, dispatched asynchronously,
+    same compiled executable (:func:`_batch_fn`) on its own device, dispatched asynchronously,
     and the results are assembled into sharded arrays again. Neither
     ``jit`` of the sharded batch (XLA then puts an all-reduce of the while loop's
     stop test in every solver step) nor ``shard_map`` (implicit diffrax solvers
     fail inside it, diffrax issue #765) is used; a shard also gets the same
     executable as a one-device run, so the table does not depend on the device
     count (impact chaos would amplify any last-bit difference)."""
-    fn = _batch_fn(tuple(names), settings)
+    fn = _batch_fn(tuple(names), settings, len(xs) > jax.device_count())
     sharding = NamedSharding(_mesh(), P("designs"))  # rows over all devices of all processes
     per = len(xs) // jax.process_count()
     local = xs[jax.process_index() * per:(jax.process_index() + 1) * per]
@@ -319,7 +354,8 @@ def _table(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
 
 
 def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Settings(), *, out=None,
-        resume: bool = False, chunk: int = 16, progress: bool = True) -> dict[str, np.ndarray]:
+        resume: bool = False, chunk: int | None = None, workers: int = 1,
+        progress: bool = True) -> dict[str, np.ndarray]:
     """Simulate every design and return the table (as :func:`read_table`).
 
     Args:
@@ -331,8 +367,12 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
             batch; without it the table is only returned.
         resume: continue the sweep in ``out``: designs already in the table are
             not solved again (the designs must be the same, checked exactly).
-        chunk: designs per ``vmap`` batch (rounded up to a multiple of the device
-            count); bounds memory and is the checkpoint granularity.
+        chunk: designs solved together (rounded up to a multiple of the device count;
+            one per device: each solved alone, several: a ``vmap`` batch per device);
+            bounds memory and is the checkpoint granularity. Default
+            :func:`default_chunk`.
+        workers: local processes that solve chunks in parallel (one per CPU core is
+            the fastest on a CPU); 1 solves in this process. Not with ``jax.distributed``.
         progress: tqdm progress bar.
     """
     names = list(names)
@@ -388,24 +428,40 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
             invalid.append(row(i, "invalid", f"{given}: {err}"))
     emit(invalid)
 
-    # a multiple of the device count, at least 2 designs per device (a batch of one
-    # compiles to unbatched code, which rounds differently in the last bit)
+    # a multiple of the device count; one shape for every chunk (one compilation)
     n_dev = jax.device_count()
-    chunk = max(2 * n_dev, -(-int(chunk) // n_dev) * n_dev)
+    chunk = default_chunk() if chunk is None else int(chunk)
+    if chunk < 1:
+        raise ParameterError(f"chunk = {chunk} must be >= 1")
+    if int(workers) < 1:
+        raise ParameterError(f"workers = {workers} must be >= 1")
+    if workers > 1 and jax.process_count() > 1:
+        raise ParameterError("workers > 1 cannot be combined with a jax.distributed job: use processes instead")
+    chunk = -(-chunk // n_dev) * n_dev
+    chunks = []
+    for s in range(0, len(todo), chunk):
+        idx = todo[s:s + chunk]
+        xs = designs[idx]
+        if len(idx) < chunk:  # one compiled shape: pad with copies of the last design
+            xs = np.concatenate([xs, np.repeat(xs[-1:], chunk - len(idx), axis=0)])
+        chunks.append((idx, xs))
+
+    def record(idx, result):
+        metrics, status, steps = result
+        new = []
+        for j, i in enumerate(idx):
+            st = STATUSES[int(status[j])]
+            new.append(row(i, st, _MESSAGES.get(st, ""), metrics[j] if st == "ok" else None, int(steps[j])))
+        emit(new)
+        bar.update(len(idx))
+
     with tqdm(total=len(designs), initial=len(done) + len(invalid), desc="designs", unit="design",
               disable=not (progress and writer)) as bar:
-        for s in range(0, len(todo), chunk):
-            idx = todo[s:s + chunk]
-            xs = designs[idx]
-            if len(idx) < chunk:  # one compiled shape: pad with copies of the last design
-                xs = np.concatenate([xs, np.repeat(xs[-1:], chunk - len(idx), axis=0)])
-            metrics, status, steps = _evaluate(base, names, settings, xs)
-            new = []
-            for j, i in enumerate(idx):
-                st = STATUSES[int(status[j])]
-                new.append(row(i, st, _MESSAGES.get(st, ""), metrics[j] if st == "ok" else None, int(steps[j])))
-            emit(new)
-            bar.update(len(idx))
+        if workers > 1 and chunks:
+            _run_in_workers(base, names, settings, chunks, int(workers), record)
+        else:
+            for idx, xs in chunks:
+                record(idx, _evaluate(base, names, settings, xs))
     if path is not None:
         if jax.process_count() > 1:
             from jax.experimental import multihost_utils
@@ -413,6 +469,35 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
             multihost_utils.sync_global_devices("jaxcrank sweep table written")
         return read_table(path)
     return _table([dict(zip(cols, map(str, r))) for r in rows])
+
+
+_WORKER: dict = {}
+
+
+def _worker_init(base_dict, names, settings):
+    # a fresh (spawned) process: importing jaxcrank applies jaxcrank.runtime's XLA options
+    _WORKER.update(base=config.from_dict(base_dict), names=names, settings=settings)
+
+
+def _worker_solve(xs):
+    return _evaluate(_WORKER["base"], _WORKER["names"], _WORKER["settings"], xs)
+
+
+def _run_in_workers(base, names, settings, chunks, workers, record):
+    """Solve ``chunks`` in ``workers`` spawned processes, at most two chunks queued per
+    worker, and ``record`` each as it finishes (the table is sorted when read)."""
+    ctx = multiprocessing.get_context("spawn")  # a forked JAX runtime is not safe
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
+                             initargs=(config.to_dict(base), list(names), settings)) as pool:
+        pending, queue = {}, iter(chunks)
+        for idx, xs in itertools.islice(queue, 2 * workers):
+            pending[pool.submit(_worker_solve, xs)] = idx
+        while pending:
+            finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                record(pending.pop(future), future.result())
+                for idx, xs in itertools.islice(queue, 1):
+                    pending[pool.submit(_worker_solve, xs)] = idx
 
 
 def summarize(table: Mapping[str, np.ndarray], quantiles=(0.05, 0.5, 0.95)) -> dict:
@@ -445,7 +530,7 @@ class Spec:
     names: list[str]
     designs: np.ndarray
     settings: Settings
-    chunk: int
+    chunk: int | None  # None: default_chunk()
     metrics: list[str]
     tolerances: dict[str, Tolerance]
 
@@ -504,7 +589,7 @@ def spec_from_dict(d: Mapping) -> Spec:
             tolerances[name] = Tolerance(float(p.get("nominal", get_parameter(base, name))), float(p["tolerance"]),
                                          str(p.get("distribution", "uniform")))
         names, designs = monte_carlo(tolerances, n, seed)
-    return Spec(base, sampling, names, designs, settings, int(d.get("chunk", 16)), metrics, tolerances)
+    return Spec(base, sampling, names, designs, settings, (int(d["chunk"]) if "chunk" in d else None), metrics, tolerances)
 
 
 def load_spec(path) -> Spec:

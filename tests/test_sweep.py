@@ -60,6 +60,33 @@ def test_vmap_equals_python_loop_through_impacts(table):
             np.testing.assert_array_equal(one[k][0], table[k][i], err_msg=k)
 
 
+def test_batch_size_does_not_change_a_design(table):
+    """Batches of 2 and 3 designs give the same numbers for every design, wherever it
+    sits in its batch (no FMA contraction, jaxcrank.runtime: with it the same design
+    rounded differently per lane and per batch size)."""
+    three = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=3, progress=False)
+    assert list(three["status"]) == list(table["status"])
+    for k in list(sweep.METRICS) + ["steps"]:
+        np.testing.assert_array_equal(three[k], table[k], err_msg=k)
+
+
+def test_workers_give_the_single_process_table():
+    """Two local worker processes, each design solved alone (one per chunk), give the
+    table of one process exactly, failures and invalid designs included."""
+    alone = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, progress=False)
+    pooled = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, workers=2, progress=False)
+    assert list(alone["status"]) == list(pooled["status"]) == ["ok", "max_steps", "ok", "invalid", "ok"]
+    for k in ["index", "steps"] + list(sweep.METRICS):
+        np.testing.assert_array_equal(pooled[k], alone[k], err_msg=k)
+    assert list(pooled["message"]) == list(alone["message"])
+
+
+@pytest.mark.parametrize("kwargs, match", [({"chunk": 0}, "chunk"), ({"workers": 0}, "workers")])
+def test_bad_chunk_or_workers_raise(kwargs, match):
+    with pytest.raises(ParameterError, match=match):
+        sweep.run(jc.paper(), NAMES, DESIGNS[:1], SHORT, progress=False, **kwargs)
+
+
 def test_failures_are_reported_and_the_rest_completes(table):
     assert list(table["status"]) == ["ok", "max_steps", "ok", "invalid", "ok"]
     assert "max_steps" in table["message"][1] and "clearance_C = 0.009" in table["message"][3]
@@ -213,12 +240,12 @@ def test_cli_sweep_writes_table_summary_figures_and_resumes(tmp_path, table):
         '[simulation]\nrevolutions = 0.03\nsamples_per_revolution = 1200\nmetrics_from_revolution = 0.01\n'
         'max_steps = 20000\n')
     out = tmp_path / "run"
-    assert cli.main(["sweep", "--spec", str(spec), "--out", str(out), "--quiet"]) == 0
+    assert cli.main(["sweep", "--spec", str(spec), "--out", str(out), "--quiet", "--workers", "2"]) == 0
     tab = sweep.read_table(out / "table.csv")
     np.testing.assert_array_equal(tab["max_abs_slider_x_deviation_m"],
                                   table["max_abs_slider_x_deviation_m"][[0, 2]])
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["status_counts"]["ok"] == 2
+    assert summary["status_counts"]["ok"] == 2 and summary["workers"] == 2 and summary["chunk"] == 2
     assert (out / "figures" / "heatmap_max_abs_slider_x_deviation_m.png").exists()
     assert cli.main(["sweep", "--spec", str(spec), "--out", str(out), "--quiet"]) == 2  # would overwrite
     assert cli.main(["sweep", "--spec", str(spec), "--out", str(out), "--quiet", "--resume"]) == 0
