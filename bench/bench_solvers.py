@@ -32,7 +32,7 @@ import numpy as np
 import scipy.integrate
 
 import jaxcrank as jc
-from jaxcrank import model, outputs, solve
+from jaxcrank import model, outputs, runtime, solve
 
 
 def _timed(fn):
@@ -113,6 +113,7 @@ def main():
     args = p.parse_args()
     mech = jc.paper()
     report = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "jax": jax.__version__,
+                          "cpus_usable": len(os.sched_getaffinity(0)), **runtime.describe(),
                           "device": str(jax.devices()[0])},
               "tolerance": args.tol}
     print(f"paper run, {args.t1} s, default solver {solve.DEFAULT_SOLVER} ...", flush=True)

@@ -178,7 +178,9 @@ def main(argv=None):
             r["after_compile_vs_loop"] = r["designs_per_s"] / base["designs_per_s"]
     import jax
 
-    report = {"machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(),
+    from jaxcrank import runtime
+
+    report = {"machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(), **runtime.describe(),
                           "python": platform.python_version(), "jax": jax.__version__,
                           "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}"},
               "workload": "Monte Carlo of the paper design, clearances B and C 0.5 +- 0.05 mm (uniform); "

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import time
 from pathlib import Path
@@ -34,7 +35,7 @@ import jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
 
 import jaxcrank as jc  # noqa: E402
-from jaxcrank import model, solve  # noqa: E402
+from jaxcrank import model, runtime, solve  # noqa: E402
 
 
 def _timed(fn, *args):
@@ -92,6 +93,7 @@ def main(argv=None):
     per_step = wall / attempts * 1e6
     report = {
         "machine": {"platform": platform.platform(), "jax": jax.__version__, "diffrax": diffrax.__version__,
+                    "cpus_usable": len(os.sched_getaffinity(0)), **runtime.describe(),
                     "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}"},
         "paper_run": {"wall_s": wall, "accepted_steps": int(sim.num_steps), "rejected_steps": int(sim.num_rejected),
                       "us_per_step": per_step},

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import time
 from pathlib import Path
@@ -25,7 +26,7 @@ import jax
 import numpy as np
 
 import jaxcrank as jc
-from jaxcrank import outputs, solve
+from jaxcrank import outputs, runtime, solve
 
 RUNS = {"tsit5": [1e-4, 1e-5, 1e-6, 1e-7, 1e-8], "rodas4": [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8]}
 
@@ -59,7 +60,8 @@ def main(argv=None):
     print("reference (tsit5, 1e-10) ...", flush=True)
     ref, ref_wall, _, ref_steps, _ = paper_run(mech, args.t1, "tsit5", 1e-10)
     check, *_ = paper_run(mech, args.t1, "rodas4", 1e-9)
-    report = {"machine": {"platform": platform.platform(), "jax": jax.__version__, "device": str(jax.devices()[0])},
+    report = {"machine": {"platform": platform.platform(), "jax": jax.__version__, "device": str(jax.devices()[0]),
+                          "cpus_usable": len(os.sched_getaffinity(0)), **runtime.describe()},
               "t1_s": args.t1, "error_window_s": args.error_window,
               "reference": {"solver": "tsit5", "tol": 1e-10, "wall_s": ref_wall, "steps": ref_steps,
                             "error_of_rodas4_1e-9": errors(check, ref, args.error_window)},

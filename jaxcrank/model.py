@@ -107,12 +107,29 @@ def full_positions(mech: Mechanism, s, t):
     return jnp.stack([centre[0], centre[1], th2, x3])
 
 
-def joint_points(mech: Mechanism, name: str, s, sd, t):
-    """(pin centre, pin velocity, hole centre, hole velocity) of joint ``name``, m and m/s."""
+def coordinates(mech: Mechanism, s, sd, t):
+    """Full coordinates Q, their rate dQ/dt and ``gamma`` = d2Q/dt2 at zero s''
+    (the velocity-product terms), from the deviations s, s' at time t."""
+    t = jnp.asarray(t, dtype=float)
     one = jnp.ones_like(t)
-    q, qd = jax.jvp(lambda a, b: full_positions(mech, a, b), (s, t), (sd, one))
-    u2 = jnp.stack([jnp.cos(q[2]), jnp.sin(q[2])])
-    half = 0.5 * mech.rod_length * u2
+
+    def velocity(s_, t_):
+        return jax.jvp(lambda a, b: full_positions(mech, a, b), (s_, t_), (sd, one))
+
+    (q, qd), (_, gamma) = jax.jvp(velocity, (s, t), (sd, one))
+    return q, qd, gamma
+
+
+def _rod_half(mech: Mechanism, q):
+    """Vector from the rod's centre of mass to its end C (to end B: minus it), m."""
+    return 0.5 * mech.rod_length * jnp.stack([jnp.cos(q[2]), jnp.sin(q[2])])
+
+
+def joint_points(mech: Mechanism, name: str, q, qd, t):
+    """(pin centre, pin velocity, hole centre, hole velocity) of joint ``name`` for full
+    coordinates Q = (x2, y2, theta2, x3) and their rates, m and m/s. The hole is on the
+    rod (its end B or C); the pin is the crank pin (B) or the slider pin (C)."""
+    half = _rod_half(mech, q)
     half_dot = qd[2] * _perp(half)
     if name == "B":
         pin = ideal.crank_pin(mech, t)
@@ -121,16 +138,26 @@ def joint_points(mech: Mechanism, name: str, s, sd, t):
     return pin, jnp.stack([qd[3], jnp.zeros_like(qd[3])]), q[:2] + half, qd[:2] + half_dot
 
 
+def joint_accelerations(mech: Mechanism, name: str, q, qd, qdd, t):
+    """(pin acceleration, hole acceleration) of joint ``name``, m/s^2: the time
+    derivatives of :func:`joint_points`' velocities (the crank turns at constant speed)."""
+    half = _rod_half(mech, q)
+    half_ddot = qdd[2] * _perp(half) - qd[2] ** 2 * half
+    if name == "B":
+        return -mech.crank_speed**2 * ideal.crank_pin(mech, t), qdd[:2] - half_ddot
+    return jnp.stack([qdd[3], jnp.zeros_like(qdd[3])]), qdd[:2] + half_ddot
+
+
 def eccentricities(mech: Mechanism, t, y):
     """Pin-in-bearing state of a run with clearance at B and C: eccentricities
     d = pin centre - hole centre, shape (2, 2) for (B, C), m, and their rates, m/s."""
     if clearance_joints(mech) != ("B", "C"):
         raise ValueError("eccentricities() needs clearance at both B and C")
     phys = y * state_scales(mech)
-    s, sd = phys[:4], phys[4:8]
+    q, qd, _ = coordinates(mech, phys[:4], phys[4:8], t)
     d, dd = [], []
     for name in ("B", "C"):
-        pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
+        pin, pin_vel, hole, hole_vel = joint_points(mech, name, q, qd, t)
         d.append(pin - hole)
         dd.append(pin_vel - hole_vel)
     return jnp.stack(d), jnp.stack(dd)
@@ -184,10 +211,20 @@ def memory_tracking(penetration, freeze_width):
     return laws.smoothstep(-penetration / freeze_width)
 
 
-def state_memory_target(mech: Mechanism, name: str, s, sd, t):
-    """Memory target (:func:`memory_target`) of joint ``name`` from the generalized state, m/s."""
-    pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
-    return memory_target(pin - hole, pin_vel - hole_vel, getattr(mech, f"joint_{name}").clearance)
+def memory_target_rate(eccentricity, relative_velocity, relative_acceleration, clearance):
+    """Time derivative of :func:`memory_target` along the motion, m/s^2.
+
+    With m = max(|d|, c/2): ``(v.v + d.a) / m - (d.v) m' / m^2``, where
+    ``m' = d.v / |d|`` while |d| > c/2 and 0 inside (c is constant in time).
+    """
+    eps = laws.safe_norm(eccentricity)
+    half = 0.5 * clearance
+    outside = eps > half
+    d_v = jnp.dot(eccentricity, relative_velocity)
+    m = jnp.maximum(eps, half)
+    m_rate = jnp.where(outside, d_v / jnp.where(outside, eps, 1.0), 0.0)
+    return (jnp.dot(relative_velocity, relative_velocity) + jnp.dot(eccentricity, relative_acceleration)) / m \
+        - d_v * m_rate / m**2
 
 
 def _perp(v):
@@ -293,8 +330,24 @@ class Frame(NamedTuple):
     state_rate: jax.Array  # dy/dt of the scaled state
 
 
-def evaluate(mech: Mechanism, t, y) -> Frame:
-    """All physical quantities at time t (s) for scaled state y; also dy/dt."""
+class Dynamics(NamedTuple):
+    """What the equations of motion give at one instant (SI): full coordinates and
+    their first two rates, the clearance joints' contacts, ideal-joint reactions,
+    the driving moment and dy/dt of the scaled state."""
+
+    q: jax.Array
+    qd: jax.Array
+    qdd: jax.Array
+    contacts: dict
+    reaction_B: jax.Array  # force of an ideal joint's pin on the rod, N (zeros for a clearance joint)
+    reaction_C: jax.Array
+    driving_moment: jax.Array
+    state_rate: jax.Array
+
+
+def dynamics(mech: Mechanism, t, y) -> Dynamics:
+    """The equations of motion at time t (s) for scaled state y: only what dy/dt
+    needs (:func:`evaluate` adds the output-only quantities)."""
     n = n_dof(mech)
     joints = clearance_joints(mech)
     k = len(joints)
@@ -302,22 +355,14 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
     phys = y * scale
     s, sd, memory = phys[:n], phys[n : 2 * n], phys[2 * n : 2 * n + k]
     t = jnp.asarray(t, dtype=float)
-    one = jnp.ones_like(t)
-
-    def velocity(s_, t_):
-        return jax.jvp(lambda a, b: full_positions(mech, a, b), (s_, t_), (sd, one))
-
-    (q, qd), (_, gamma) = jax.jvp(velocity, (s, t), (sd, one))
+    q, qd, gamma = coordinates(mech, s, sd, t)
     mass = ideal.mass_matrix(mech)
     centre = q[:2]
-    th1 = ideal.crank_angle(mech, t)
-    crank_pin = ideal.crank_pin(mech, t)
 
     applied = ideal.rod_gravity(mech)
-    contacts = {}
-    memory_rates = []
+    contacts, velocities = {}, {}
     for i, name in enumerate(joints):
-        pin, pin_vel, hole, hole_vel = joint_points(mech, name, s, sd, t)
+        pin, pin_vel, hole, hole_vel = joint_points(mech, name, q, qd, t)
         if name == "B":
             cj = joint_contact(mech, mech.joint_B, mech.crank_material, mech.rod_material,
                                pin, pin_vel, mech.crank_speed, hole, hole_vel, qd[2], memory[i])
@@ -329,7 +374,7 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
         slider_x = cj.force_on_pin[0] if name == "C" else 0.0
         applied = applied + jnp.stack([f_hole[0], f_hole[1], arm[0] * f_hole[1] - arm[1] * f_hole[0], slider_x])
         contacts[name] = cj
-        memory_rates.append(cj.memory_rate)
+        velocities[name] = pin_vel - hole_vel
 
     if n == 4:  # Q = Q_ideal + s: J is the identity, M is diagonal
         sdd = (applied - mass * gamma) / mass
@@ -338,35 +383,45 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
         jac = jax.jacfwd(lambda a: full_positions(mech, a, t))(s)
         lhs = jac.T @ (mass[:, None] * jac)
         rhs = jac.T @ (applied - mass * gamma)
-        # 2x2 solve in closed form (LAPACK calls cost more than the arithmetic here)
-        det = lhs[0, 0] * lhs[1, 1] - lhs[0, 1] * lhs[1, 0]
-        sdd = jnp.stack([lhs[1, 1] * rhs[0] - lhs[0, 1] * rhs[1], lhs[0, 0] * rhs[1] - lhs[1, 0] * rhs[0]]) / det
+        sdd = ideal.solve_2x2(lhs, rhs)
         qdd = jac @ sdd + gamma
     else:
         sdd = jnp.zeros(0)
         qdd = gamma
 
-    if k:
-        # While separated the memory follows d(delta_dot)/dt exactly (the time
-        # derivative of the penetration rates along the motion), so at impact
-        # onset it equals the approach speed without lag; the relaxation term in
-        # memory_rate only erases the offset left by the previous rebound.
-        def targets(s_, sd_, t_):
-            return jnp.stack([state_memory_target(mech, name, s_, sd_, t_) for name in joints])
-
-        _, target_dot = jax.jvp(targets, (s, sd, t), (sd, sdd, one))
-        memory_rates = [r + contacts[name].memory_tracking * td for r, td, name in zip(memory_rates, target_dot, joints)]
+    # While separated the memory follows d(delta_dot)/dt exactly (the time derivative
+    # of the memory target along the motion), so at impact onset it equals the
+    # approach speed without lag; the relaxation term in memory_rate only erases the
+    # offset left by the previous rebound.
+    memory_rates = []
+    for name in joints:
+        cj = contacts[name]
+        pin_acc, hole_acc = joint_accelerations(mech, name, q, qd, qdd, t)
+        target_rate = memory_target_rate(cj.eccentricity, velocities[name], pin_acc - hole_acc,
+                                         getattr(mech, f"joint_{name}").clearance)
+        memory_rates.append(cj.memory_rate + cj.memory_tracking * target_rate)
 
     residual = mass * qdd - applied
     react_b, react_c = ideal.reactions(mech, q, residual, mech.joint_B.ideal, mech.joint_C.ideal)
     if "B" in contacts:
         moment = ideal.driving_moment_from_pin_force(mech, t, -contacts["B"].force_on_pin, contacts["B"].pin_point)
     else:
-        moment = ideal.driving_moment_from_pin_force(mech, t, react_b, crank_pin)
+        moment = ideal.driving_moment_from_pin_force(mech, t, react_b, ideal.crank_pin(mech, t))
     dissipation = sum((cj.dissipation for cj in contacts.values()), jnp.zeros(()))
-
     rate = jnp.concatenate([sd, sdd, jnp.stack(memory_rates) if k else jnp.zeros(0),
                             jnp.stack([moment * mech.crank_speed, dissipation])]) / scale
+    return Dynamics(q, qd, qdd, contacts, react_b, react_c, moment, rate)
+
+
+def evaluate(mech: Mechanism, t, y) -> Frame:
+    """All physical quantities at time t (s) for scaled state y; also dy/dt."""
+    t = jnp.asarray(t, dtype=float)
+    dyn = dynamics(mech, t, y)
+    q, qd, qdd, contacts = dyn.q, dyn.qd, dyn.qdd, dyn.contacts
+    react_b, react_c, moment, rate = dyn.reaction_B, dyn.reaction_C, dyn.driving_moment, dyn.state_rate
+    phys = y * state_scales(mech)
+    mass = ideal.mass_matrix(mech)
+    th1 = ideal.crank_angle(mech, t)
 
     qi, qdi, qddi = ideal.kinematics(mech, t)
     kinetic = 0.5 * jnp.sum(mass * qd**2)
@@ -408,7 +463,7 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
 
 def vector_field(t, y, mech: Mechanism):
     """dy/dt for diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=mech``."""
-    return evaluate(mech, t, y).state_rate
+    return dynamics(mech, t, y).state_rate
 
 
 def initial_state(mech: Mechanism):
