@@ -12,6 +12,8 @@ rtol = atol = 1e-6, as ``jaxcrank simulate``) into:
 - diffrax's own loop: the same solver, saving and step count with a trivial vector
   field of the same size (constant step size, so the step count is fixed), i.e.
   the per-step cost no vector field can remove;
+- one vector-jacobian product of the field (w.r.t. the state and every
+  parameter), evaluated the same way: the unit of work of a reverse-mode step;
 - the paper run itself.
 
 Tsit5 evaluates the vector field 6 times a step (FSAL), so
@@ -64,6 +66,25 @@ def field_cost(mech, traced: bool, n=200_000):
     return wall / n * 1e6
 
 
+def vjp_cost(mech, n=100_000):
+    """us per vector-jacobian product of the vector field (cotangent to the state
+    and to every float parameter) inside a compiled loop."""
+    y0 = model.initial_state(mech) + 0.1
+    m0 = jax.tree_util.tree_map(lambda x: jnp.asarray(x) if isinstance(x, float) else x, mech)
+
+    def loop(y, m):
+        def body(i, carry):
+            y, acc = carry
+            _, pullback = jax.vjp(lambda y, m: model.vector_field(i * 1e-7, y, m), y + acc * 1e-12, m)
+            ct_y, ct_m = pullback(jnp.ones_like(y))
+            return y, acc + ct_y + 1e-12 * ct_m.crank_length  # a data dependence per step
+
+        return jax.lax.fori_loop(0, n, body, (y, jnp.zeros_like(y)))[1]
+
+    _, wall = _timed(jax.jit(loop), y0, m0)
+    return wall / n * 1e6
+
+
 def loop_overhead(size, t1, n_samples, steps):
     """us per diffrax step with a trivial vector field of ``size`` entries."""
     ts = jnp.linspace(0.0, t1, n_samples)
@@ -89,6 +110,7 @@ def main(argv=None):
     attempts = int(sim.num_steps) + int(sim.num_rejected)
     field_static = field_cost(mech, traced=False)
     field_traced = field_cost(mech, traced=True)
+    vjp = vjp_cost(mech)
     overhead = loop_overhead(model.state_size(mech), float(ts[-1]), len(ts), attempts)
     per_step = wall / attempts * 1e6
     report = {
@@ -98,6 +120,8 @@ def main(argv=None):
         "paper_run": {"wall_s": wall, "accepted_steps": int(sim.num_steps), "rejected_steps": int(sim.num_rejected),
                       "us_per_step": per_step},
         "vector_field_us_per_eval": {"parameters_constant": field_static, "parameters_traced": field_traced},
+        "vjp_us_per_eval": vjp,
+        "vjp_over_field_traced": vjp / field_traced,
         "diffrax_loop_us_per_step_trivial_field": overhead,
         "model_us_per_step": overhead + 6 * field_static,
         "loop_floor_s_for_paper_run_steps": overhead * attempts * 1e-6,
@@ -107,7 +131,7 @@ def main(argv=None):
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(report, indent=2))
     print(f"paper run: {wall:.2f} s, {attempts} steps, {per_step:.1f} us/step; vector field {field_static:.2f} us "
-          f"(traced parameters {field_traced:.2f} us); diffrax loop alone {overhead:.1f} us/step -> "
+          f"(traced parameters {field_traced:.2f} us, its VJP {vjp:.2f} us); diffrax loop alone {overhead:.1f} us/step -> "
           f"{overhead * attempts * 1e-6:.2f} s floor; wrote {a.out}")
     return 0
 

@@ -13,8 +13,8 @@ Method: Rodas4 of Hairer & Wanner (Solving ODEs II, 2nd ed., Sec. IV.7; the
 coefficients of their code RODAS, in the transformed form with stage
 increments ``k_i``), order 4 with an embedded order-3 solution (the error
 estimate is the last stage), six stages, one Jacobian and one matrix inverse
-per step (:func:`inverse`, plain array operations, so that XLA can compile the
-solver loop into one kernel), L-stable and stiffly accurate, with the method's order-3 dense output
+per step (:func:`jaxcrank.linalg.inverse`, plain array operations, so that XLA can
+compile the solver loop into one kernel), L-stable and stiffly accurate, with the method's order-3 dense output
 (like the stages, the dense output loses order on stiff components when a step
 is much longer than their time constant; the step-end values do not).
 Works for a state that is one 1-D array (jaxcrank's scaled state).
@@ -28,6 +28,8 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .linalg import inverse
 
 GAMMA = 0.25
 # stage k_i starts from y0 + sum_j A[i][j] k_j (stage 6 from stage 5's point + k_5)
@@ -55,33 +57,6 @@ _A6 = _padded(A[1:] + (A[4] + (1.0,),))  # stage 6 starts from stage 5's point +
 _STAGE_ROWS = (_A6, _padded(C[1:]), np.array(NODES[1:]), np.array(D[1:]), np.arange(1, 6))
 _A_LAST = np.array(A[4] + (1.0, 1.0))  # y1 = stage 6's point + k6
 _H = _padded(H)
-
-
-def inverse(m):
-    """Inverse of a small square matrix by Gauss-Jordan elimination with partial
-    pivoting, written in plain array operations.
-
-    ``jnp.linalg.inv`` is a LAPACK custom call, and XLA never compiles a while loop
-    that contains a custom call into one kernel (``jaxcrank.runtime``): the whole
-    solver loop would stay on the thunk runtime, ~10x slower a step. For the 10 x 10
-    iteration matrix here the elimination costs less than the call did.
-    """
-    n = m.shape[0]
-    rows = jnp.arange(n)
-
-    def eliminate(j, a):
-        column = jax.lax.dynamic_index_in_dim(a, j, axis=1, keepdims=False)
-        pivot = jnp.argmax(jnp.where(rows >= j, jnp.abs(column), -1.0))
-        row_j = jax.lax.dynamic_index_in_dim(a, j, keepdims=False)
-        row_p = jax.lax.dynamic_index_in_dim(a, pivot, keepdims=False)
-        a = jax.lax.dynamic_update_index_in_dim(a, row_j, pivot, 0)  # swap rows j and pivot
-        normalised = row_p / row_p[j]
-        a = jax.lax.dynamic_update_index_in_dim(a, normalised, j, 0)
-        factors = jnp.where(rows == j, 0.0, jax.lax.dynamic_index_in_dim(a, j, axis=1, keepdims=False))
-        return a - factors[:, None] * normalised[None, :]
-
-    augmented = jnp.concatenate([m, jnp.eye(n, dtype=m.dtype)], axis=1)
-    return jax.lax.fori_loop(0, n, eliminate, augmented)[:, n:]
 
 
 def _combine(weights, ks):

@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from . import model
+from .linalg import DenseInverse
 from .rosenbrock import Rodas4
 from .params import Mechanism
 
@@ -64,11 +65,17 @@ class Simulation(eqx.Module):
 
 
 def make_solver(name: str = DEFAULT_SOLVER):
-    """A diffrax solver by name (``SOLVERS``); implicit ones use a chord
-    Newton method at the step-size controller's tolerances."""
+    """A diffrax solver by name (``SOLVERS``). The implicit Runge-Kutta ones (Kvaerno)
+    use diffrax's chord Newton method at the step-size controller's tolerances, with
+    :class:`jaxcrank.linalg.DenseInverse` for its linear solves instead of lineax's
+    LU, a LAPACK call that keeps XLA from compiling the solver loop into one kernel."""
     if name not in SOLVERS:
         raise ValueError(f"solver {name!r} is unknown; valid names: {', '.join(SOLVERS)}")
-    return SOLVERS[name]()
+    cls = SOLVERS[name]
+    if issubclass(cls, diffrax.AbstractImplicitSolver):
+        chord = diffrax.with_stepsize_controller_tols(diffrax.VeryChord)(linear_solver=DenseInverse())
+        return cls(root_finder=chord)
+    return cls()
 
 
 def _controller(solver, rtol, atol):

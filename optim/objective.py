@@ -204,12 +204,14 @@ def solve_window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, o
     sim = simulate(mech, ts=ts, y0=start_state(mech, starts, i), solver=obj.window_solver,
                    rtol=obj.rtol, atol=obj.atol, max_steps=obj.window_max_steps, throw=False)
     ok = sim.ok & jnp.all(jnp.isfinite(sim.ys))
-    return sim.ts[1:], jnp.where(ok, sim.ys, 0.0)[1:], ok
+    # the requested times, not sim.ts: a failed diffrax solve fills its ts with inf
+    return ts[1:], jnp.where(ok, sim.ys, 0.0)[1:], ok
 
 
 def _window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: Objective):
     ts, ys, ok = solve_window(mech, starts, i, n_window, dt, obj)
-    return jnp.sum(transmission_angle_error(mech, ts, ys) ** 2), ok
+    sq = jnp.sum(transmission_angle_error(mech, ts, ys) ** 2)
+    return jnp.where(ok, sq, 0.0), ok
 
 
 def window_gradients(mech: Mechanism, starts: Starts, obj: Objective = Objective()):

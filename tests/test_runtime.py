@@ -58,22 +58,26 @@ def test_configure_after_backend_start_warns_and_leaves_flags():
     assert "XLA_FLAGS" not in environ
 
 
-def _compiled_solve_text():
+def _compiled_solve_text(solver=solve.DEFAULT_SOLVER):
     mech = jc.paper()
     ts = solve.sample_times(mech, t1=1e-3)
-    return jax.jit(lambda m: solve.simulate(m, ts=ts, throw=False).ys).lower(mech).compile().as_text()
+    return jax.jit(lambda m: solve.simulate(m, ts=ts, solver=solver, throw=False).ys).lower(mech).compile().as_text()
 
 
 X86 = platform.machine().lower() in ("x86_64", "amd64")
 
 
 @pytest.mark.skipif(jax.default_backend() != "cpu" or not X86, reason="x86 CPU compiler options")
-def test_solver_loop_is_one_kernel_in_this_process():
+@pytest.mark.parametrize("solver", ["tsit5", "rodas4", "kvaerno5"])
+def test_solver_loop_is_one_kernel_in_this_process(solver):
+    """The explicit default and both stiff solvers: no LAPACK call or matrix-product
+    fusion inside the loop (jaxcrank.linalg, rosenbrock._combine) keeps it on the
+    thunk runtime."""
     # conftest imports jaxcrank first, so the options are in force here ("user" when the
     # parent process, e.g. pytest-xdist's controller, already put them in XLA_FLAGS)
     flags = os.environ.get("XLA_FLAGS", "")
     assert runtime.OPTION in flags and "--xla_cpu_max_isa" in flags, runtime.status
-    text = _compiled_solve_text()
+    text = _compiled_solve_text(solver)
     entry = text[text.index("ENTRY"):]
     assert 'xla_cpu_small_call="true"' in text
     assert " while(" not in entry  # diffrax's loop became one kernel
