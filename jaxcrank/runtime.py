@@ -3,12 +3,13 @@
 Since JAX 0.4.32, XLA's CPU backend runs every kernel of a while loop through its
 thunk runtime: one dispatch per kernel per iteration, with dependency tracking and
 work stealing between threads. A solver step of this model is a few hundred tiny
-kernels, so the dispatches, not the arithmetic, set the cost: 13 us a step on the
-paper run (1.37 s for 0.4 s simulated, ``bench/bench_solvers.py``). XLA has a pass
+kernels, so the dispatches, not the arithmetic, set the cost: 17 us a step on the
+paper run (1.7 s for 0.4 s simulated; ``bench/results/step_cost_thunk_runtime.json``). XLA has a pass
 that compiles a whole while loop into one kernel (the loop's instructions are then
 plain code in one function) when the loop accesses fewer bytes than
 ``xla_cpu_small_while_loop_byte_threshold`` (its default is 1 kB). At 1 GB diffrax's
-loop is one kernel and the paper run takes 1.7 us a step (0.17 s). Loops that
+loop is one kernel and the paper run takes 1.6 us a step (0.16 s,
+``bench/results/step_cost.json``). Loops that
 contain custom calls (LAPACK), scatters or sorts are never compiled this way.
 
 XLA reads ``XLA_FLAGS`` once, when JAX starts its backend (the first array or
