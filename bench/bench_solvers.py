@@ -10,8 +10,10 @@ Measures, on this machine's CPU:
   minutes on the full run): every diffrax solver and scipy's LSODA and Radau
   (with the jitted Jacobian) on the same jitted vector field at the same
   tolerances, wall time and steps, and the agreement of the window's metrics;
-- reverse-mode gradient time of a window metric against the forward time, and the
-  same two-parameter gradient in forward mode (``jax.jacfwd``, ``diffrax.ForwardMode``).
+- reverse-mode gradient time of a window metric against the forward time, the
+  same two-parameter gradient in forward mode (``jax.jacfwd``, ``diffrax.ForwardMode``),
+  and reverse mode with every step stored instead of recomputed
+  (``RecursiveCheckpointAdjoint(checkpoints=steps)``).
 Writes one JSON file; nothing is asserted.
 """
 
@@ -71,6 +73,12 @@ def scipy_run(mech, t1, method, tol, n_samples):
             "metrics": outputs.metrics(cols, mech, t_start=0.0)}
 
 
+def _steps(mech, l1, l2, ts, tol):
+    m = eqx.tree_at(lambda x: (x.crank_length, x.rod_length), mech, (l1, l2))
+    sim = solve.simulate(m, ts=ts, rtol=tol, atol=tol, max_steps=1_000_000)
+    return sim.num_steps + sim.num_rejected
+
+
 def gradient_timing(mech, t1, tol):
     ts = jnp.linspace(0.0, t1, 201)
 
@@ -91,11 +99,19 @@ def gradient_timing(mech, t1, tol):
     g, grad_wall = _timed(lambda: grad(*args))
     _, fm_first = _timed(lambda: jac_fwd(*args))
     gf, fm_wall = _timed(lambda: jac_fwd(*args))
+    # every step stored instead of recomputed: a checkpoint per step of the forward solve
+    n_steps = int(jax.jit(lambda a, b: _steps(mech, a, b, ts, tol))(*args))
+    stored = diffrax.RecursiveCheckpointAdjoint(checkpoints=n_steps)
+    grad_stored = jax.jit(jax.grad(lambda a, b: objective(a, b, stored), argnums=(0, 1)))
+    _, st_first = _timed(lambda: grad_stored(*args))
+    _, st_wall = _timed(lambda: grad_stored(*args))
     return {"window_s": t1, "forward_wall_s": fwd_wall, "forward_compile_s": fwd_first - fwd_wall,
             "gradient_wall_s": grad_wall, "gradient_compile_s": grad_first - grad_wall,
             "gradient_over_forward": grad_wall / fwd_wall, "gradient": [float(x) for x in g],
             "forward_mode_wall_s": fm_wall, "forward_mode_compile_s": fm_first - fm_wall,
             "forward_mode_over_forward": fm_wall / fwd_wall, "forward_mode_gradient": [float(x) for x in gf],
+            "gradient_every_step_stored_wall_s": st_wall, "gradient_every_step_stored_compile_s": st_first - st_wall,
+            "gradient_every_step_stored_over_forward": st_wall / fwd_wall, "checkpoints": n_steps,
             "note": "over 20 ms both derivatives are the chaotic pathwise one (~1e27, README 'Known "
                     "limitation'); this times the work, tests/test_gradients.py checks that the two modes "
                     "agree on 1.2 ms"}

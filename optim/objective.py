@@ -62,9 +62,12 @@ class Objective(eqx.Module):
             phases (friction ramp) and the derivative of its discrete solution then
             blows up in about 1 % of windows (README, "Design optimisation";
             ``bench/window_gradients.py``). Default ``kvaerno5``; the linearly
-            implicit ``rodas4`` gives the same gradients at rtol 1e-6 in about half
-            the time but its reverse mode is less exact at tight tolerances
-            (README, "Design optimisation").
+            implicit ``rodas4`` gives the same gradients at rtol 1e-6 in a fraction
+            of the time but its reverse mode moves by up to 1.5 % between rtol 1e-6
+            and 1e-9 where kvaerno5's does not; kvaerno5's Newton iterations stall in
+            some stick phases (5 of the paper window's 100 windows needed 17 000 to
+            63 000 steps; ``window_max_steps`` leaves them out) (README, "Design
+            optimisation").
         rtol, atol: solver tolerances on the scaled state.
         max_steps: step budget of the long solve.
     """
