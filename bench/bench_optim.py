@@ -5,8 +5,9 @@ Nelder-Mead with bounds on the same forward solve).
     python bench/bench_optim.py                   # evaluation window (0.1, 0.15] s
     python bench/bench_optim.py --t-end 0.3       # the paper window (slow)
 
-Writes bench/results/optim.json: per method the objective reached (degrees), its
-ratio to the grid's best, objective evaluations (forward solves), gradient
+Writes bench/results/optim.json: per method the objective reached (degrees; the
+optimiser's final design re-evaluated with the grid's evaluator, its own value beside
+it), its ratio to the grid's best, objective evaluations (forward solves), gradient
 evaluations, wall time including compilation, and the compile time of the first call.
 """
 
@@ -49,8 +50,12 @@ def main(argv=None):
     wall = time.perf_counter() - tic
     h = res["history"]
     first = h[0]["seconds"]
+    # the final design evaluated by the grid's own compiled solve: two differently compiled
+    # solves of one design round differently, and impact chaos amplifies that (README)
+    on_grid = float(search.evaluate(prob, np.asarray([res["final"]]), chunk=args.grid, progress=False)[0][0])
     out["adam_ensemble_gradient"] = {
-        "objective_deg": res["final_objective"], "over_grid_best": res["final_objective"] / best,
+        "objective_deg": on_grid, "over_grid_best": on_grid / best,
+        "objective_deg_own_solve": res["final_objective"],
         "iterations": len(h), "gradient_evaluations": len(h), "wall_s": wall,
         "first_iteration_s_incl_compile": first,
         "iterations_to_within_0.5pct_of_grid_best": next(
