@@ -15,6 +15,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from . import linalg
 from .params import Mechanism
 
 
@@ -108,18 +109,10 @@ def reactions(mech: Mechanism, q, residual, ideal_B: bool, ideal_C: bool):
         return zero, zero
     a = jnp.stack(columns, axis=1)
     normal, rhs = a.T @ a, a.T @ residual
-    lam = solve_2x2(normal, rhs) if len(columns) == 2 else jnp.linalg.solve(normal, rhs)
+    lam = linalg.solve_2x2(normal, rhs) if len(columns) == 2 else jnp.linalg.solve(normal, rhs)
     f_b = lam[:2] if ideal_B else zero
     f_c = lam[-2:] if ideal_C else zero
     return f_b, f_c
-
-
-def solve_2x2(a, b):
-    """a^-1 b for a 2 x 2 matrix, in closed form: a LAPACK call costs more than this
-    arithmetic, and XLA never compiles a solver loop that contains one into a single
-    kernel (``jaxcrank.runtime``)."""
-    det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-    return jnp.stack([a[1, 1] * b[0] - a[0, 1] * b[1], a[0, 0] * b[1] - a[1, 0] * b[0]]) / det
 
 
 def driving_moment_from_pin_force(mech: Mechanism, t, force_on_rod_at_B, contact_point):

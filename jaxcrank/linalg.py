@@ -1,11 +1,12 @@
-"""Small dense linear algebra in plain array operations, for the implicit solvers.
+"""Small dense linear algebra in plain array operations, for the solver loop.
 
 XLA never compiles a while loop that contains a custom call (LAPACK's ``getrf``
 behind ``jnp.linalg.inv`` and ``jax.scipy.linalg.lu_factor``) into one kernel
 (:mod:`jaxcrank.runtime`), so an implicit solver that factorises its 10 x 10
 iteration matrix with LAPACK keeps the whole solver loop on XLA's slower thunk
 runtime. For matrices this small, elimination written as array operations costs
-less than the call did.
+less than the call did; the 2 x 2 systems of the equations of motion and the
+ideal-joint reactions are solved in closed form.
 """
 
 from __future__ import annotations
@@ -37,6 +38,12 @@ def inverse(m):
 
     augmented = jnp.concatenate([m, jnp.eye(n, dtype=m.dtype)], axis=1)
     return jax.lax.fori_loop(0, n, eliminate, augmented)[:, n:]
+
+
+def solve_2x2(a, b):
+    """a^-1 b for a 2 x 2 matrix a, in closed form."""
+    det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    return jnp.stack([a[1, 1] * b[0] - a[0, 1] * b[1], a[0, 0] * b[1] - a[1, 0] * b[0]]) / det
 
 
 class DenseInverse(lx.AbstractLinearSolver):

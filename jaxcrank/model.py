@@ -33,7 +33,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from . import ideal, laws
+from . import ideal, laws, linalg
 from .params import Joint, Material, Mechanism
 
 
@@ -383,7 +383,7 @@ def dynamics(mech: Mechanism, t, y) -> Dynamics:
         jac = jax.jacfwd(lambda a: full_positions(mech, a, t))(s)
         lhs = jac.T @ (mass[:, None] * jac)
         rhs = jac.T @ (applied - mass * gamma)
-        sdd = ideal.solve_2x2(lhs, rhs)
+        sdd = linalg.solve_2x2(lhs, rhs)
         qdd = jac @ sdd + gamma
     else:
         sdd = jnp.zeros(0)

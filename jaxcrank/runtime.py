@@ -36,7 +36,10 @@ the last bit (measured, ``tests/test_sensitivity.py``, ``tests/test_sweep.py``):
   batch size (2e-8 relative after 3 ms), so a table changed with ``chunk`` and with the
   number of devices or processes.
 
-Without FMA the paper run costs 5 % more (0.176 s against 0.168 s). The option names
+Leaving out FMA costs no measurable speed: ``XLA_FLAGS=--xla_cpu_max_isa=AVX2 python
+bench/step_cost.py`` (AVX2 has FMA; the user's value wins) timed the paper run at 0.22 s
+against 0.16 s without FMA, one run each on one core, where an earlier run had it the
+other way round (0.168 s against 0.176 s): within this machine's run-to-run noise. The option names
 an x86 instruction set; on other machines (e.g. ARM) :func:`configure` sets neither
 option and XLA's defaults apply (the thunk runtime: slower, exact gradients).
 
@@ -112,7 +115,7 @@ def configure(environ=os.environ, machine: str | None = None) -> str:
         if jax.default_backend() == "cpu":
             warnings.warn(
                 "jaxcrank was imported after JAX started its backend, so it could not set its XLA "
-                "options (jaxcrank.runtime): simulations on the CPU then run about 8x slower, or, where "
+                "options (jaxcrank.runtime): simulations on the CPU then run about 10x slower, or, where "
                 "XLA_FLAGS already compile while loops into one kernel, with inexact reverse-mode "
                 "gradients. Import "
                 "jaxcrank before running any JAX computation, or start Python with "
