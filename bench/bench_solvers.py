@@ -13,7 +13,10 @@ Measures, on this machine's CPU:
 - reverse-mode gradient time of a window metric against the forward time, the
   same two-parameter gradient in forward mode (``jax.jacfwd``, ``diffrax.ForwardMode``),
   and reverse mode with every step stored instead of recomputed
-  (``RecursiveCheckpointAdjoint(checkpoints=steps)``).
+  (``RecursiveCheckpointAdjoint(checkpoints=steps)``); compile split into tracing
+  (Python: JAX and diffrax building the program) and XLA's compilation;
+- the same reverse-mode machinery with a vector field that costs nothing (a 12-state
+  linear ODE at the same number of constant tsit5 steps): diffrax's own share.
 Writes one JSON file; nothing is asserted.
 """
 
@@ -79,6 +82,19 @@ def _steps(mech, l1, l2, ts, tol):
     return sim.num_steps + sim.num_rejected
 
 
+def _compiled(fn, *args):
+    """``fn`` jitted, traced and compiled for ``args``: (compiled, trace s, XLA compile s,
+    wall s of the second call)."""
+    start = time.perf_counter()
+    lowered = jax.jit(fn).lower(*args)
+    traced = time.perf_counter()
+    compiled = lowered.compile()
+    done = time.perf_counter()
+    jax.block_until_ready(compiled(*args))
+    _, wall = _timed(lambda: compiled(*args))
+    return compiled, traced - start, done - traced, wall
+
+
 def gradient_timing(mech, t1, tol):
     ts = jnp.linspace(0.0, t1, 201)
 
@@ -87,34 +103,57 @@ def gradient_timing(mech, t1, tol):
         sim = solve.simulate(m, ts=ts, rtol=tol, atol=tol, max_steps=1_000_000, adjoint=adjoint)
         return outputs.rms_transmission_error(sim, t_start=0.0)
 
-    fwd = jax.jit(objective)
-    grad = jax.jit(jax.grad(objective, argnums=(0, 1)))
+    args = (jnp.asarray(mech.crank_length), jnp.asarray(mech.rod_length))
+    _, fwd_trace, fwd_xla, fwd_wall = _compiled(objective, *args)
+    grad, grad_trace, grad_xla, grad_wall = _compiled(jax.grad(objective, argnums=(0, 1)), *args)
+    g = grad(*args)
     # forward mode: one pass carrying both tangents (diffrax.ForwardMode; the default
     # adjoint's checkpointed loop is reverse-mode only)
-    jac_fwd = jax.jit(jax.jacfwd(lambda a, b: objective(a, b, diffrax.ForwardMode()), argnums=(0, 1)))
-    args = (jnp.asarray(mech.crank_length), jnp.asarray(mech.rod_length))
-    _, fwd_first = _timed(lambda: fwd(*args))
-    _, fwd_wall = _timed(lambda: fwd(*args))
-    _, grad_first = _timed(lambda: grad(*args))
-    g, grad_wall = _timed(lambda: grad(*args))
-    _, fm_first = _timed(lambda: jac_fwd(*args))
-    gf, fm_wall = _timed(lambda: jac_fwd(*args))
+    jac_fwd, fm_trace, fm_xla, fm_wall = _compiled(
+        jax.jacfwd(lambda a, b: objective(a, b, diffrax.ForwardMode()), argnums=(0, 1)), *args)
+    gf = jac_fwd(*args)
     # every step stored instead of recomputed: a checkpoint per step of the forward solve
     n_steps = int(jax.jit(lambda a, b: _steps(mech, a, b, ts, tol))(*args))
     stored = diffrax.RecursiveCheckpointAdjoint(checkpoints=n_steps)
-    grad_stored = jax.jit(jax.grad(lambda a, b: objective(a, b, stored), argnums=(0, 1)))
-    _, st_first = _timed(lambda: grad_stored(*args))
-    _, st_wall = _timed(lambda: grad_stored(*args))
-    return {"window_s": t1, "forward_wall_s": fwd_wall, "forward_compile_s": fwd_first - fwd_wall,
-            "gradient_wall_s": grad_wall, "gradient_compile_s": grad_first - grad_wall,
+    _, st_trace, st_xla, st_wall = _compiled(jax.grad(lambda a, b: objective(a, b, stored), argnums=(0, 1)), *args)
+    return {"window_s": t1, "forward_wall_s": fwd_wall, "forward_trace_s": fwd_trace,
+            "forward_compile_s": fwd_trace + fwd_xla,
+            "gradient_wall_s": grad_wall, "gradient_trace_s": grad_trace, "gradient_xla_compile_s": grad_xla,
+            "gradient_compile_s": grad_trace + grad_xla,
             "gradient_over_forward": grad_wall / fwd_wall, "gradient": [float(x) for x in g],
-            "forward_mode_wall_s": fm_wall, "forward_mode_compile_s": fm_first - fm_wall,
+            "forward_mode_wall_s": fm_wall, "forward_mode_compile_s": fm_trace + fm_xla,
             "forward_mode_over_forward": fm_wall / fwd_wall, "forward_mode_gradient": [float(x) for x in gf],
-            "gradient_every_step_stored_wall_s": st_wall, "gradient_every_step_stored_compile_s": st_first - st_wall,
+            "gradient_every_step_stored_wall_s": st_wall, "gradient_every_step_stored_compile_s": st_trace + st_xla,
             "gradient_every_step_stored_over_forward": st_wall / fwd_wall, "checkpoints": n_steps,
-            "note": "over 20 ms both derivatives are the chaotic pathwise one (~1e27, README 'Known "
-                    "limitation'); this times the work, tests/test_gradients.py checks that the two modes "
-                    "agree on 1.2 ms"}
+            "adjoint_floor": adjoint_floor(n_steps, ts),
+            "note": "compile = trace and lower + XLA compile. Over 20 ms both derivatives are the chaotic "
+                    "pathwise one (~1e27, README 'Known limitation'); this times the work, "
+                    "tests/test_gradients.py checks that the two modes agree on 1.2 ms"}
+
+
+def adjoint_floor(n_steps, ts):
+    """What diffrax's reverse mode costs with a vector field that costs nothing: a
+    12-state linear ODE, tsit5 at ``n_steps`` constant steps, saved at ``ts``; the
+    ratio of its gradient (two parameters, default checkpointed adjoint) to its forward
+    solve. The machinery's own share of the ratio measured on the model."""
+    t1 = float(ts[-1])
+
+    def field(t, y, args):
+        a, b = args
+        return a * jnp.roll(y, 1) - b * y
+
+    def objective(a, b):
+        sol = diffrax.diffeqsolve(diffrax.ODETerm(field), diffrax.Tsit5(), 0.0, t1, t1 / n_steps,
+                                  jnp.full(12, 0.1), args=(a, b), saveat=diffrax.SaveAt(ts=ts),
+                                  stepsize_controller=diffrax.ConstantStepSize(), max_steps=n_steps + 10)
+        return jnp.sqrt(jnp.mean(sol.ys**2))
+
+    args = (jnp.asarray(1.0), jnp.asarray(2.0))
+    _, _, _, fwd = _compiled(objective, *args)
+    _, _, _, grad = _compiled(jax.grad(objective, argnums=(0, 1)), *args)
+    return {"steps": n_steps, "forward_wall_s": fwd, "forward_us_per_step": fwd / n_steps * 1e6,
+            "gradient_wall_s": grad, "gradient_over_forward": grad / fwd,
+            "backward_us_per_step": (grad - fwd) / n_steps * 1e6}
 
 
 def main():

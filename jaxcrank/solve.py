@@ -127,8 +127,8 @@ def simulate(mech: Mechanism, t1=None, *, ts=None, n_samples=None, y0=None, solv
         adjoint: diffrax adjoint (default ``RecursiveCheckpointAdjoint``, exact
             reverse-mode gradients of the discrete solve). For ``jax.jacfwd`` /
             ``jax.jvp`` pass ``diffrax.ForwardMode()``: with a few parameters it is
-            the cheaper gradient (two parameters: 3.2x the forward solve against
-            7.4x for reverse mode, ``bench/bench_solvers.py``).
+            the cheaper gradient (two parameters: 5.3x the forward solve against
+            8.2x for reverse mode, ``bench/bench_solvers.py``).
         progress: show a tqdm progress bar (host callback; CLI runs).
         throw: raise :class:`SimulationError` when the solve fails or produces
             non-finite values. With ``throw=False`` inspect ``Simulation.ok``
