@@ -468,8 +468,9 @@ def vector_field(t, y, mech: Mechanism):
     Jitted so that a solve holds one call of the field's jaxpr per stage, which JAX
     linearizes and transposes once, instead of the field's equations inlined at every
     stage: the benchmark's reverse-mode gradient compiles in 7.0 s (2.6 s of it tracing)
-    instead of 10-13 s (``bench/bench_solvers.py``). XLA inlines the call again, so the
-    compiled solve runs the same.
+    instead of 10-13 s (``bench/bench_solvers.py``). XLA inlines the call again: the
+    solve runs at the same speed, the tsit5 paper run to the same bits; a ``vmap`` batch
+    or a rodas4 solve can round differently in the last bit than before.
     """
     return dynamics(mech, t, y).state_rate
 
