@@ -37,13 +37,22 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=Path("bench/results/optim.json"))
     args = ap.parse_args(argv)
     prob = paper_problem(Objective(t_end=args.t_end))
-    out = {"problem": prob.description, "t_end_s": args.t_end, "cpu_devices": jax.device_count(),
-           "start": list(prob.start)}
+    out = {
+        "problem": prob.description,
+        "t_end_s": args.t_end,
+        "cpu_devices": jax.device_count(),
+        "start": list(prob.start),
+    }
 
     tic = time.perf_counter()
     grid = search.grid_search(prob, n=args.grid, chunk=args.grid)
-    out["grid"] = {"points": args.grid**2, "best_design_SI": grid.best.tolist(), "objective_deg": grid.best_value,
-                   "forward_solves": args.grid**2, "wall_s": time.perf_counter() - tic}
+    out["grid"] = {
+        "points": args.grid**2,
+        "best_design_SI": grid.best.tolist(),
+        "objective_deg": grid.best_value,
+        "forward_solves": args.grid**2,
+        "wall_s": time.perf_counter() - tic,
+    }
     best = grid.best_value
 
     tic = time.perf_counter()
@@ -55,13 +64,19 @@ def main(argv=None):
     # solves of one design round differently, and impact chaos amplifies that (README)
     on_grid = float(search.evaluate(prob, np.asarray([res["final"]]), chunk=args.grid, progress=False)[0][0])
     out["adam_ensemble_gradient"] = {
-        "objective_deg": on_grid, "over_grid_best": on_grid / best,
+        "objective_deg": on_grid,
+        "over_grid_best": on_grid / best,
         "objective_deg_own_solve": res["final_objective"],
-        "iterations": len(h), "gradient_evaluations": len(h), "wall_s": wall,
+        "iterations": len(h),
+        "gradient_evaluations": len(h),
+        "wall_s": wall,
         "first_iteration_s_incl_compile": first,
         "iterations_to_within_0.5pct_of_grid_best": next(
-            (r["iteration"] + 1 for r in h if r["objective_deg"] <= 1.005 * best), None),
-        "final_design_SI": res["final"], "converged": res["converged"]}
+            (r["iteration"] + 1 for r in h if r["objective_deg"] <= 1.005 * best), None
+        ),
+        "final_design_SI": res["final"],
+        "converged": res["converged"],
+    }
 
     evals = []
     f = jax.jit(lambda x: prob.objective_value(x, method="pathwise"))
@@ -72,22 +87,40 @@ def main(argv=None):
         return v
 
     tic = time.perf_counter()
-    nm = minimize(fun, np.asarray(prob.start), method="Nelder-Mead",
-                  bounds=list(zip(prob.lower, prob.upper)),
-                  options={"xatol": 1e-4, "fatol": 1e-6, "maxfev": 60, "initial_simplex": np.array(
-                      [prob.start, [prob.start[0] + 0.005, prob.start[1]], [prob.start[0], prob.start[1] + 0.005]])})
-    out["nelder_mead"] = {"objective_deg": float(nm.fun), "over_grid_best": float(nm.fun) / best,
-                          "forward_solves": len(evals), "wall_s": time.perf_counter() - tic,
-                          "final_design_SI": nm.x.tolist(),
-                          "solves_to_within_0.5pct_of_grid_best": next(
-                              (i + 1 for i, v in enumerate(evals) if v <= 1.005 * best), None)}
+    nm = minimize(
+        fun,
+        np.asarray(prob.start),
+        method="Nelder-Mead",
+        bounds=list(zip(prob.lower, prob.upper)),
+        options={
+            "xatol": 1e-4,
+            "fatol": 1e-6,
+            "maxfev": 60,
+            "initial_simplex": np.array(
+                [prob.start, [prob.start[0] + 0.005, prob.start[1]], [prob.start[0], prob.start[1] + 0.005]]
+            ),
+        },
+    )
+    out["nelder_mead"] = {
+        "objective_deg": float(nm.fun),
+        "over_grid_best": float(nm.fun) / best,
+        "forward_solves": len(evals),
+        "wall_s": time.perf_counter() - tic,
+        "final_design_SI": nm.x.tolist(),
+        "solves_to_within_0.5pct_of_grid_best": next((i + 1 for i, v in enumerate(evals) if v <= 1.005 * best), None),
+    }
     # one design, differently compiled: alone (the jitted pathwise objective) and as a
     # lane of vmap batches of 1, 2 and grid-size designs
     x = np.asarray(grid.best)
     out["best_design_by_compiled_program_deg"] = {
         "alone": float(f(x)),
-        **{f"batch_{c}": float(search.evaluate(prob, np.stack([x] + [np.asarray(prob.start)] * (c - 1)), chunk=c,
-                                               progress=False)[0][0]) for c in (1, 2, args.grid)}}
+        **{
+            f"batch_{c}": float(
+                search.evaluate(prob, np.stack([x] + [np.asarray(prob.start)] * (c - 1)), chunk=c, progress=False)[0][0]
+            )
+            for c in (1, 2, args.grid)
+        },
+    }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(out, indent=2))
     print(json.dumps(out, indent=2))

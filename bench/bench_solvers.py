@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
@@ -35,26 +33,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.integrate
+from _common import machine, timed
 
 import jaxcrank as jc
-from jaxcrank import model, outputs, runtime, solve
-
-
-def _timed(fn):
-    start = time.perf_counter()
-    out = fn()
-    jax.block_until_ready(out)
-    return out, time.perf_counter() - start
+from jaxcrank import model, outputs, solve
 
 
 def jax_run(mech, t1, solver, tol, n_samples):
     ts = jnp.linspace(0.0, t1, n_samples)
     # the first call compiles; the second is timed as the run
-    sim, first = _timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
-    sim, wall = _timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
-    cols = outputs.trajectory(sim)
-    return {"solver": solver, "wall_s": wall, "compile_s": max(first - wall, 0.0), "steps": int(sim.num_steps),
-            "rejected": int(sim.num_rejected), "metrics": outputs.metrics(cols, mech, t_start=0.0)}
+    sim, first = timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
+    sim, wall = timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
+    return {
+        "solver": solver,
+        "wall_s": wall,
+        "compile_s": max(first - wall, 0.0),
+        "steps": int(sim.num_steps),
+        "rejected": int(sim.num_rejected),
+        "metrics": outputs.sample_metrics(sim, 0.0),
+    }
 
 
 def scipy_run(mech, t1, method, tol, n_samples):
@@ -66,14 +63,21 @@ def scipy_run(mech, t1, method, tol, n_samples):
     ts = np.linspace(0.0, t1, n_samples)
     kwargs = {"jac": lambda t, y: np.asarray(jac(t, y))} if method in ("Radau", "BDF", "LSODA") else {}
     start = time.perf_counter()
-    sol = scipy.integrate.solve_ivp(lambda t, y: np.asarray(f(t, y)), (0.0, t1), y0, method=method, t_eval=ts,
-                                    rtol=tol, atol=tol, **kwargs)
+    sol = scipy.integrate.solve_ivp(
+        lambda t, y: np.asarray(f(t, y)), (0.0, t1), y0, method=method, t_eval=ts, rtol=tol, atol=tol, **kwargs
+    )
     wall = time.perf_counter() - start
     sim = solve.Simulation(mech, jnp.asarray(sol.t), jnp.asarray(sol.y.T), None, jnp.asarray(sol.nfev), jnp.asarray(0))
-    cols = outputs.trajectory(sim)
-    return {"solver": f"scipy-{method}", "wall_s": wall, "compile_s": 0.0, "steps": None, "nfev": int(sol.nfev),
-            "njev": int(getattr(sol, "njev", 0) or 0), "success": bool(sol.success),
-            "metrics": outputs.metrics(cols, mech, t_start=0.0)}
+    return {
+        "solver": f"scipy-{method}",
+        "wall_s": wall,
+        "compile_s": 0.0,
+        "steps": None,
+        "nfev": int(sol.nfev),
+        "njev": int(getattr(sol, "njev", 0) or 0),
+        "success": bool(sol.success),
+        "metrics": outputs.sample_metrics(sim, 0.0),
+    }
 
 
 def _steps(mech, l1, l2, ts, tol):
@@ -91,7 +95,7 @@ def _compiled(fn, *args):
     compiled = lowered.compile()
     done = time.perf_counter()
     jax.block_until_ready(compiled(*args))
-    _, wall = _timed(lambda: compiled(*args))
+    _, wall = timed(lambda: compiled(*args))
     return compiled, traced - start, done - traced, wall
 
 
@@ -110,25 +114,37 @@ def gradient_timing(mech, t1, tol):
     # forward mode: one pass carrying both tangents (diffrax.ForwardMode; the default
     # adjoint's checkpointed loop is reverse-mode only)
     jac_fwd, fm_trace, fm_xla, fm_wall = _compiled(
-        jax.jacfwd(lambda a, b: objective(a, b, diffrax.ForwardMode()), argnums=(0, 1)), *args)
+        jax.jacfwd(lambda a, b: objective(a, b, diffrax.ForwardMode()), argnums=(0, 1)), *args
+    )
     gf = jac_fwd(*args)
     # every step stored instead of recomputed: a checkpoint per step of the forward solve
     n_steps = int(jax.jit(lambda a, b: _steps(mech, a, b, ts, tol))(*args))
     stored = diffrax.RecursiveCheckpointAdjoint(checkpoints=n_steps)
     _, st_trace, st_xla, st_wall = _compiled(jax.grad(lambda a, b: objective(a, b, stored), argnums=(0, 1)), *args)
-    return {"window_s": t1, "forward_wall_s": fwd_wall, "forward_trace_s": fwd_trace,
-            "forward_compile_s": fwd_trace + fwd_xla,
-            "gradient_wall_s": grad_wall, "gradient_trace_s": grad_trace, "gradient_xla_compile_s": grad_xla,
-            "gradient_compile_s": grad_trace + grad_xla,
-            "gradient_over_forward": grad_wall / fwd_wall, "gradient": [float(x) for x in g],
-            "forward_mode_wall_s": fm_wall, "forward_mode_compile_s": fm_trace + fm_xla,
-            "forward_mode_over_forward": fm_wall / fwd_wall, "forward_mode_gradient": [float(x) for x in gf],
-            "gradient_every_step_stored_wall_s": st_wall, "gradient_every_step_stored_compile_s": st_trace + st_xla,
-            "gradient_every_step_stored_over_forward": st_wall / fwd_wall, "checkpoints": n_steps,
-            "adjoint_floor": adjoint_floor(n_steps, ts),
-            "note": "compile = trace and lower + XLA compile. Over 20 ms both derivatives are the chaotic "
-                    "pathwise one (~1e27, README 'Known limitation'); this times the work, "
-                    "tests/test_gradients.py checks that the two modes agree on 1.2 ms"}
+    return {
+        "window_s": t1,
+        "forward_wall_s": fwd_wall,
+        "forward_trace_s": fwd_trace,
+        "forward_compile_s": fwd_trace + fwd_xla,
+        "gradient_wall_s": grad_wall,
+        "gradient_trace_s": grad_trace,
+        "gradient_xla_compile_s": grad_xla,
+        "gradient_compile_s": grad_trace + grad_xla,
+        "gradient_over_forward": grad_wall / fwd_wall,
+        "gradient": [float(x) for x in g],
+        "forward_mode_wall_s": fm_wall,
+        "forward_mode_compile_s": fm_trace + fm_xla,
+        "forward_mode_over_forward": fm_wall / fwd_wall,
+        "forward_mode_gradient": [float(x) for x in gf],
+        "gradient_every_step_stored_wall_s": st_wall,
+        "gradient_every_step_stored_compile_s": st_trace + st_xla,
+        "gradient_every_step_stored_over_forward": st_wall / fwd_wall,
+        "checkpoints": n_steps,
+        "adjoint_floor": adjoint_floor(n_steps, ts),
+        "note": "compile = trace and lower + XLA compile. Over 20 ms both derivatives are the chaotic "
+        "pathwise one (~1e27, README 'Known limitation'); this times the work, "
+        "tests/test_gradients.py checks that the two modes agree on 1.2 ms",
+    }
 
 
 def adjoint_floor(n_steps, ts):
@@ -143,17 +159,31 @@ def adjoint_floor(n_steps, ts):
         return a * jnp.roll(y, 1) - b * y
 
     def objective(a, b):
-        sol = diffrax.diffeqsolve(diffrax.ODETerm(field), diffrax.Tsit5(), 0.0, t1, t1 / n_steps,
-                                  jnp.full(12, 0.1), args=(a, b), saveat=diffrax.SaveAt(ts=ts),
-                                  stepsize_controller=diffrax.ConstantStepSize(), max_steps=n_steps + 10)
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field),
+            diffrax.Tsit5(),
+            0.0,
+            t1,
+            t1 / n_steps,
+            jnp.full(12, 0.1),
+            args=(a, b),
+            saveat=diffrax.SaveAt(ts=ts),
+            stepsize_controller=diffrax.ConstantStepSize(),
+            max_steps=n_steps + 10,
+        )
         return jnp.sqrt(jnp.mean(sol.ys**2))
 
     args = (jnp.asarray(1.0), jnp.asarray(2.0))
     _, _, _, fwd = _compiled(objective, *args)
     _, _, _, grad = _compiled(jax.grad(objective, argnums=(0, 1)), *args)
-    return {"steps": n_steps, "forward_wall_s": fwd, "forward_us_per_step": fwd / n_steps * 1e6,
-            "gradient_wall_s": grad, "gradient_over_forward": grad / fwd,
-            "backward_us_per_step": (grad - fwd) / n_steps * 1e6}
+    return {
+        "steps": n_steps,
+        "forward_wall_s": fwd,
+        "forward_us_per_step": fwd / n_steps * 1e6,
+        "gradient_wall_s": grad,
+        "gradient_over_forward": grad / fwd,
+        "backward_us_per_step": (grad - fwd) / n_steps * 1e6,
+    }
 
 
 def main():
@@ -167,10 +197,7 @@ def main():
     p.add_argument("--out", type=Path, default=Path("bench/results/solvers.json"))
     args = p.parse_args()
     mech = jc.paper()
-    report = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "jax": jax.__version__,
-                          "cpus_usable": len(os.sched_getaffinity(0)), **runtime.describe(),
-                          "device": str(jax.devices()[0])},
-              "tolerance": args.tol}
+    report = {"machine": machine(), "tolerance": args.tol}
     print(f"paper run, {args.t1} s, default solver {solve.DEFAULT_SOLVER} ...", flush=True)
     report["paper_run"] = jax_run(mech, args.t1, solve.DEFAULT_SOLVER, args.tol, int(args.t1 * 36000) + 1)
     print(json.dumps(report["paper_run"], indent=1), flush=True)
@@ -191,9 +218,10 @@ def main():
     base = next(r for r in window if r["solver"] == solve.DEFAULT_SOLVER)
     for r in window:
         r["speedup_of_default"] = r["wall_s"] / base["wall_s"]
-        r["max_slider_dev_rel_diff_vs_default"] = abs(
-            r["metrics"]["max_abs_slider_x_deviation_m"] - base["metrics"]["max_abs_slider_x_deviation_m"]
-        ) / base["metrics"]["max_abs_slider_x_deviation_m"]
+        r["max_slider_dev_rel_diff_vs_default"] = (
+            abs(r["metrics"]["max_abs_slider_x_deviation_m"] - base["metrics"]["max_abs_slider_x_deviation_m"])
+            / base["metrics"]["max_abs_slider_x_deviation_m"]
+        )
     report["window"] = {"t1_s": args.window, "runs": window}
     print("gradient timing ...", flush=True)
     report["gradient"] = gradient_timing(mech, args.window, args.tol)

@@ -22,7 +22,8 @@ Measured in one run, on this machine's CPU:
 Each entry has the wall time of all designs end to end (the first call: start-up
 and compilation included) and after compilation (a second call; with workers, whose
 processes end with each call, the time after every worker has finished one design),
-with designs per second for both. Writes one JSON file; nothing is asserted. Runs on whatever JAX's default backend is: on a GPU
+with designs per second for both. Writes one JSON file; nothing is asserted. Runs on
+whatever JAX's default backend is: on a GPU
 machine, e.g. ``--designs 2048 --batch-sizes 2048 --devices 1 --loop-designs 1``
 (a batch needs thousands of designs there, and a single solve is ~20x slower than
 on a CPU, so the loop baseline gets one design).
@@ -33,7 +34,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
@@ -51,9 +51,11 @@ def _setup():
 
 
 def _designs(n):
-    _, _, sweep = _setup()
-    tol = {"clearance_B": sweep.Tolerance(5e-4, 5e-5), "clearance_C": sweep.Tolerance(5e-4, 5e-5)}
-    return sweep.monte_carlo(tol, n, seed=0)
+    _setup()
+    from jaxcrank import sampling
+
+    tol = {"clearance_B": sampling.Tolerance(5e-4, 5e-5), "clearance_C": sampling.Tolerance(5e-4, 5e-5)}
+    return sampling.monte_carlo(tol, n, seed=0)
 
 
 def _settings(revolutions):
@@ -80,10 +82,19 @@ def loop(n, revolutions):
 
 
 def _entry(mode, batch, devices, workers, n, end_to_end, wall=None, failed=0):
-    return {"mode": mode, "batch": batch, "devices": devices, "workers": workers, "designs": n,
-            "end_to_end_s": end_to_end, "end_to_end_designs_per_s": n / end_to_end,
-            "compile_s": None if wall is None else max(end_to_end - wall, 0.0), "wall_s": wall,
-            "designs_per_s": None if wall is None else n / wall, "failed": failed}
+    return {
+        "mode": mode,
+        "batch": batch,
+        "devices": devices,
+        "workers": workers,
+        "designs": n,
+        "end_to_end_s": end_to_end,
+        "end_to_end_designs_per_s": n / end_to_end,
+        "compile_s": None if wall is None else max(end_to_end - wall, 0.0),
+        "wall_s": wall,
+        "designs_per_s": None if wall is None else n / wall,
+        "failed": failed,
+    }
 
 
 def batched(n, batch, revolutions, workers=1):
@@ -107,23 +118,36 @@ def _workers(base, names, xs, settings, workers):
     one, over the time they took (worker start-up and compilation excluded)."""
     _, _, sweep = _setup()
     stamps = []
-    chunks = [([i], xs[i:i + 1]) for i in range(len(xs))]
+    chunks = [([i], xs[i : i + 1]) for i in range(len(xs))]
     start = time.perf_counter()
-    sweep._run_in_workers(base, names, settings, chunks, workers, lambda idx, result: stamps.append(time.perf_counter()))
+    sweep.run_in_workers(base, names, settings, chunks, workers, lambda idx, result: stamps.append(time.perf_counter()))
     n = len(xs)
     warm = stamps[workers - 1]
     wall = (stamps[-1] - warm) * n / (n - workers)
     entry = _entry("workers", 1, 1, workers, n, stamps[-1] - start, wall)
-    entry["note"] = ("wall_s: time from the moment every worker had finished one design (compiled) to the "
-                     "last design, scaled to all designs")
+    entry["note"] = (
+        "wall_s: time from the moment every worker had finished one design (compiled) to the "
+        "last design, scaled to all designs"
+    )
     return entry
 
 
 def _child(args):
     """Run one measurement in a fresh process (device count is fixed at JAX start-up)."""
-    cmd = [sys.executable, __file__, "--child", args["mode"], "--designs", str(args["designs"]),
-           "--batch-sizes", str(args["batch"]), "--revolutions", str(args["revolutions"]),
-           "--workers", str(args.get("workers", 1))]
+    cmd = [
+        sys.executable,
+        __file__,
+        "--child",
+        args["mode"],
+        "--designs",
+        str(args["designs"]),
+        "--batch-sizes",
+        str(args["batch"]),
+        "--revolutions",
+        str(args["revolutions"]),
+        "--workers",
+        str(args.get("workers", 1)),
+    ]
     env = dict(os.environ)
     flags = env.get("XLA_FLAGS", "")
     env["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={args['devices']}".strip()
@@ -145,20 +169,23 @@ def main(argv=None):
     p.add_argument("--child", choices=["loop", "batch"], help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.child:
-        res = loop(a.designs, a.revolutions) if a.child == "loop" else batched(
-            a.designs, int(a.batch_sizes), a.revolutions, int(a.workers))
+        res = (
+            loop(a.designs, a.revolutions)
+            if a.child == "loop"
+            else batched(a.designs, int(a.batch_sizes), a.revolutions, int(a.workers))
+        )
         print(json.dumps(res))
         return 0
 
     batches = [int(b) for b in a.batch_sizes.split(",")]
     devices = [int(d) for d in a.devices.split(",")]
     common = {"designs": a.designs, "revolutions": a.revolutions}
+
     def show(label, r):
         after = "" if r["designs_per_s"] is None else f"{r['designs_per_s']:.3f} designs/s after compile, "
         print(f"{label}: {after}{r['end_to_end_designs_per_s']:.3f} end to end", flush=True)
 
-    runs = [_child({"mode": "loop", "batch": 1, "devices": 1, **common,
-                    "designs": a.loop_designs or a.designs})]
+    runs = [_child({"mode": "loop", "batch": 1, "devices": 1, **common, "designs": a.loop_designs or a.designs})]
     show("loop", runs[-1])
     for b in batches:
         runs.append(_child({"mode": "batch", "batch": b, "devices": 1, **common}))
@@ -176,22 +203,24 @@ def main(argv=None):
         r["end_to_end_vs_loop"] = r["end_to_end_designs_per_s"] / base["end_to_end_designs_per_s"]
         if r["designs_per_s"] is not None:
             r["after_compile_vs_loop"] = r["designs_per_s"] / base["designs_per_s"]
-    import jax
 
-    from jaxcrank import runtime
+    from _common import machine
 
-    report = {"machine": {"platform": platform.platform(), "cpu_count": os.cpu_count(), **runtime.describe(),
-                          "python": platform.python_version(), "jax": jax.__version__,
-                          "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}"},
-              "workload": "Monte Carlo of the paper design, clearances B and C 0.5 +- 0.05 mm (uniform); "
-                          f"{a.revolutions:g} revolutions at 600 rpm, tsit5, rtol = atol = 1e-6",
-              "target_designs_per_s": 5.0, "runs": runs,
-              "best_end_to_end": max(runs, key=lambda r: r["end_to_end_designs_per_s"])}
+    report = {
+        "machine": machine(),
+        "workload": "Monte Carlo of the paper design, clearances B and C 0.5 +- 0.05 mm (uniform); "
+        f"{a.revolutions:g} revolutions at 600 rpm, tsit5, rtol = atol = 1e-6",
+        "target_designs_per_s": 5.0,
+        "runs": runs,
+        "best_end_to_end": max(runs, key=lambda r: r["end_to_end_designs_per_s"]),
+    }
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(report, indent=2))
     best = report["best_end_to_end"]
-    print(f"wrote {a.out}; best end to end {best['end_to_end_designs_per_s']:.3f} designs/s "
-          f"(chunk {best['batch']}, {best['devices']} devices, {best['workers']} workers)")
+    print(
+        f"wrote {a.out}; best end to end {best['end_to_end_designs_per_s']:.3f} designs/s "
+        f"(chunk {best['batch']}, {best['devices']} devices, {best['workers']} workers)"
+    )
     return 0
 
 

@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
@@ -36,8 +34,10 @@ import jax.numpy as jnp
 
 jax.config.update("jax_enable_x64", True)
 
+from _common import machine  # noqa: E402
+
 import jaxcrank as jc  # noqa: E402
-from jaxcrank import model, runtime, solve  # noqa: E402
+from jaxcrank import model, solve  # noqa: E402
 
 
 def _timed(fn, *args):
@@ -92,8 +92,17 @@ def loop_overhead(size, t1, n_samples, steps):
     @jax.jit
     def run(y0):
         term = diffrax.ODETerm(lambda t, y, args: jnp.cos(t) - 1e-3 * y)
-        sol = diffrax.diffeqsolve(term, diffrax.Tsit5(), 0.0, t1, t1 / steps, y0, saveat=diffrax.SaveAt(ts=ts),
-                                  stepsize_controller=diffrax.ConstantStepSize(), max_steps=steps + 10)
+        sol = diffrax.diffeqsolve(
+            term,
+            diffrax.Tsit5(),
+            0.0,
+            t1,
+            t1 / steps,
+            y0,
+            saveat=diffrax.SaveAt(ts=ts),
+            stepsize_controller=diffrax.ConstantStepSize(),
+            max_steps=steps + 10,
+        )
         return sol.ys, sol.stats["num_steps"]
 
     (_, n), wall = _timed(run, jnp.zeros(size))
@@ -114,11 +123,13 @@ def main(argv=None):
     overhead = loop_overhead(model.state_size(mech), float(ts[-1]), len(ts), attempts)
     per_step = wall / attempts * 1e6
     report = {
-        "machine": {"platform": platform.platform(), "jax": jax.__version__, "diffrax": diffrax.__version__,
-                    "cpus_usable": len(os.sched_getaffinity(0)), **runtime.describe(),
-                    "device": f"{jax.default_backend()}: {jax.devices()[0].device_kind}"},
-        "paper_run": {"wall_s": wall, "accepted_steps": int(sim.num_steps), "rejected_steps": int(sim.num_rejected),
-                      "us_per_step": per_step},
+        "machine": machine(),
+        "paper_run": {
+            "wall_s": wall,
+            "accepted_steps": int(sim.num_steps),
+            "rejected_steps": int(sim.num_rejected),
+            "us_per_step": per_step,
+        },
         "vector_field_us_per_eval": {"parameters_constant": field_static, "parameters_traced": field_traced},
         "vjp_us_per_eval": vjp,
         "vjp_over_field_traced": vjp / field_traced,
@@ -126,13 +137,16 @@ def main(argv=None):
         "model_us_per_step": overhead + 6 * field_static,
         "loop_floor_s_for_paper_run_steps": overhead * attempts * 1e-6,
         "note": "model = loop overhead + 6 vector-field evaluations (tsit5, FSAL); the floor is the paper "
-                "run's step count at the trivial field's cost, before any physics",
+        "run's step count at the trivial field's cost, before any physics",
     }
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(report, indent=2))
-    print(f"paper run: {wall:.2f} s, {attempts} steps, {per_step:.1f} us/step; vector field {field_static:.2f} us "
-          f"(traced parameters {field_traced:.2f} us, its VJP {vjp:.2f} us); diffrax loop alone {overhead:.1f} us/step -> "
-          f"{overhead * attempts * 1e-6:.2f} s floor; wrote {a.out}")
+    print(
+        f"paper run: {wall:.2f} s, {attempts} steps, {per_step:.1f} us/step; vector field {field_static:.2f} us "
+        f"(traced parameters {field_traced:.2f} us, its VJP {vjp:.2f} us); diffrax loop alone "
+        f"{overhead:.1f} us/step -> "
+        f"{overhead * attempts * 1e-6:.2f} s floor; wrote {a.out}"
+    )
     return 0
 
 

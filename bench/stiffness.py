@@ -30,10 +30,8 @@ from pathlib import Path
 
 import diffrax
 import jax
-import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from diffrax._solver.tsit5 import _tsit5_tableau
 
 import jaxcrank as jc
 from jaxcrank import model, solve
@@ -42,7 +40,7 @@ from jaxcrank.params import set_parameter
 
 def tsit5_real_stability_limit() -> float:
     """beta > 0 with |R(-beta)| = 1 for tsit5's stability function R(z) = 1 + z b^T (I - z A)^-1 1."""
-    tab = _tsit5_tableau
+    tab = diffrax.Tsit5.tableau
     s = len(tab.b_sol) - 1  # the last (FSAL) stage does not advance the solution
     a = np.zeros((s, s))
     for i, row in enumerate(tab.a_lower[: s - 1]):
@@ -70,11 +68,21 @@ def main(argv=None):
     def steps_by_regime(solver):
         """Accepted steps from 0 to t1 at rtol = atol = 1e-6, classified by the contact
         state at their start: (ts, ys, steps, rejected, per-regime counts and sizes)."""
-        sol = jax.jit(lambda: diffrax.diffeqsolve(
-            diffrax.ODETerm(model.vector_field), solver, 0.0, args.t1, 1e-6, model.initial_state(mech),
-            args=mech, saveat=diffrax.SaveAt(steps=True),
-            stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-6, norm=optx.rms_norm),
-            max_steps=2_000_000, throw=True))()
+        sol = jax.jit(
+            lambda: diffrax.diffeqsolve(
+                diffrax.ODETerm(model.vector_field),
+                solver,
+                0.0,
+                args.t1,
+                1e-6,
+                model.initial_state(mech),
+                args=mech,
+                saveat=diffrax.SaveAt(steps=True),
+                stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-6, norm=optx.rms_norm),
+                max_steps=2_000_000,
+                throw=True,
+            )
+        )()
         n = int(sol.stats["num_accepted_steps"])
         ts, ys = np.asarray(sol.ts[: n + 1]), np.asarray(sol.ys[: n + 1])
         ts, ys = ts[np.isfinite(ts)], ys[np.isfinite(ts)]
@@ -83,10 +91,17 @@ def main(argv=None):
         in_b = np.asarray(frames.penetration_B) > 0.0
         in_c = np.asarray(frames.penetration_C) > 0.0
         regimes = {}
-        for name, mask in (("both_in_contact", in_b & in_c), ("only_B_in_contact", in_b & ~in_c),
-                           ("only_C_in_contact", ~in_b & in_c), ("both_separated", ~in_b & ~in_c)):
-            regimes[name] = {"steps": int(mask.sum()), "simulated_ms": float(dt[mask].sum() * 1e3),
-                             "median_step_us": float(np.median(dt[mask]) * 1e6) if mask.any() else None}
+        for name, mask in (
+            ("both_in_contact", in_b & in_c),
+            ("only_B_in_contact", in_b & ~in_c),
+            ("only_C_in_contact", ~in_b & in_c),
+            ("both_separated", ~in_b & ~in_c),
+        ):
+            regimes[name] = {
+                "steps": int(mask.sum()),
+                "simulated_ms": float(dt[mask].sum() * 1e3),
+                "median_step_us": float(np.median(dt[mask]) * 1e6) if mask.any() else None,
+            }
         return ts, ys, dt, n, int(sol.stats["num_rejected_steps"]), regimes, in_b, in_c
 
     ts, ys, dt, n, rejected, regimes, in_b, in_c = steps_by_regime(diffrax.Tsit5())
@@ -113,8 +128,12 @@ def main(argv=None):
     contact = (in_b & in_c)[idx]
     out = {
         "machine": {"platform": platform.platform(), "jax": jax.__version__},
-        "t1_s": args.t1, "solver": "tsit5", "rtol": 1e-6, "atol": 1e-6,
-        "accepted_steps": n, "rejected_steps": rejected,
+        "t1_s": args.t1,
+        "solver": "tsit5",
+        "rtol": 1e-6,
+        "atol": 1e-6,
+        "accepted_steps": n,
+        "rejected_steps": rejected,
         "mean_step_us": float(dt.mean() * 1e6),
         "regimes": regimes,
         "rodas4": {"accepted_steps": n_rodas, "rejected_steps": rejected_rodas, "regimes": regimes_rodas},
@@ -125,19 +144,33 @@ def main(argv=None):
         "step_over_stability_limit": quant(ratio),
         "step_over_stability_limit_both_in_contact": quant(ratio[contact]) if contact.any() else None,
         "fastest_oscillation_hz_both_in_contact": quant(omega[contact] / (2 * np.pi)) if contact.any() else None,
-        "step_over_fastest_period_both_in_contact": (quant(dt[idx][contact] * omega[contact] / (2 * np.pi))
-                                                     if contact.any() else None),
+        "step_over_fastest_period_both_in_contact": (
+            quant(dt[idx][contact] * omega[contact] / (2 * np.pi)) if contact.any() else None
+        ),
         "spectral_radius_friction_off_per_s": quant(rho_nofric),
         "spectral_radius_damping_off_per_s": quant(rho_nodamp),
     }
     out["solver_steps"] = []
     for label, m in (("friction on", mech), ("friction off", set_parameter(mech, "friction.coefficient", 0.0))):
-        for name, solver in (("tsit5", "tsit5"), ("rodas4", "rodas4"), ("kvaerno5", "kvaerno5"),
-                             ("kvaerno5, full Newton (Jacobian every iteration)",
-                              diffrax.Kvaerno5(root_finder=optx.Newton(rtol=1e-6, atol=1e-6)))):
+        for name, solver in (
+            ("tsit5", "tsit5"),
+            ("rodas4", "rodas4"),
+            ("kvaerno5", "kvaerno5"),
+            (
+                "kvaerno5, full Newton (Jacobian every iteration)",
+                diffrax.Kvaerno5(root_finder=optx.Newton(rtol=1e-6, atol=1e-6)),
+            ),
+        ):
             sim = solve.simulate(m, args.window, n_samples=11, solver=solver, max_steps=1_000_000)
-            out["solver_steps"].append({"friction": label, "solver": name, "window_s": args.window,
-                                        "accepted": int(sim.num_steps), "rejected": int(sim.num_rejected)})
+            out["solver_steps"].append(
+                {
+                    "friction": label,
+                    "solver": name,
+                    "window_s": args.window,
+                    "accepted": int(sim.num_steps),
+                    "rejected": int(sim.num_rejected),
+                }
+            )
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(out, indent=2))
     print(json.dumps(out, indent=2))

@@ -51,11 +51,19 @@ def main(argv=None):
         exact, starts = O.reference(mech, obj)
         _, _, n_window, dt = obj.grid(mech)
 
-        def window(x, i, tol, solver=solver, obj=obj):
+        def window(x, i, tol, solver=solver, prob=prob, starts=starts, dt=dt, n_window=n_window):
             m = prob.mechanism(x)
             ts = starts.t[i] + dt * jnp.arange(n_window + 1)
-            sim = simulate(m, ts=ts, y0=O.start_state(m, starts, i), solver=solver, rtol=tol, atol=tol,
-                           max_steps=200_000, throw=False)
+            sim = simulate(
+                m,
+                ts=ts,
+                y0=O.start_state(m, starts, i),
+                solver=solver,
+                rtol=tol,
+                atol=tol,
+                max_steps=200_000,
+                throw=False,
+            )
             return jnp.sum(transmission_angle_error(m, sim.ts[1:], sim.ys[1:]) ** 2)
 
         tic = time.perf_counter()
@@ -68,20 +76,31 @@ def main(argv=None):
         f = np.sqrt(vals[ok].sum() / (n_window * ok.sum()))
         g = grads[ok].sum(axis=0) / (n_window * ok.sum()) / (2 * f)
         a = np.abs(grads[:, 1])
-        entry = {"windows": int(len(vals)), "finished": int(ok.sum()), "seconds_incl_compile": wall,
-                 "F_deg": float(exact), "ensemble_gradient_deg_per_m": g.tolist(),
-                 "abs_dS_dL2_quantiles": dict(zip(["50", "90", "99", "max"],
-                                                  np.nanquantile(a, [0.5, 0.9, 0.99, 1.0]).tolist())),
-                 "largest": []}
+        entry = {
+            "windows": int(len(vals)),
+            "finished": int(ok.sum()),
+            "seconds_incl_compile": wall,
+            "F_deg": float(exact),
+            "ensemble_gradient_deg_per_m": g.tolist(),
+            "abs_dS_dL2_quantiles": dict(
+                zip(["50", "90", "99", "max"], np.nanquantile(a, [0.5, 0.9, 0.99, 1.0]).tolist())
+            ),
+            "largest": [],
+        }
         f1 = jax.jit(lambda x, i: window(x, i, 1e-6))
         g9 = jax.jit(jax.grad(lambda x, i: window(x, i, 1e-9)))
-        for i in np.argsort(np.nan_to_num(a, nan=np.inf))[::-1][:args.check]:
+        for i in np.argsort(np.nan_to_num(a, nan=np.inf))[::-1][: args.check]:
             h = jnp.array([0.0, 1e-6])
             fd = (float(f1(x0 + h, int(i))) - float(f1(x0 - h, int(i)))) / 2e-6
-            entry["largest"].append({"window": int(i), "t0_s": float(starts.t[i]),
-                                     "ad_dS_dL2_rtol_1e-6": float(grads[i, 1]),
-                                     "central_difference_rtol_1e-6": fd,
-                                     "ad_dS_dL2_rtol_1e-9": float(g9(x0, int(i))[1])})
+            entry["largest"].append(
+                {
+                    "window": int(i),
+                    "t0_s": float(starts.t[i]),
+                    "ad_dS_dL2_rtol_1e-6": float(grads[i, 1]),
+                    "central_difference_rtol_1e-6": fd,
+                    "ad_dS_dL2_rtol_1e-9": float(g9(x0, int(i))[1]),
+                }
+            )
         report["solvers"][solver] = entry
         print(solver, json.dumps(entry, indent=1), flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -33,6 +33,7 @@ RUNS = {"tsit5": [1e-4, 1e-5, 1e-6, 1e-7, 1e-8], "rodas4": [1e-3, 1e-4, 1e-5, 1e
 
 def paper_run(mech, t1, solver, tol):
     """(trajectory columns, wall time after compilation, compile time, accepted, rejected)."""
+
     def go():
         start = time.perf_counter()
         sim = solve.simulate(mech, t1, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000)
@@ -46,8 +47,10 @@ def paper_run(mech, t1, solver, tol):
 
 def errors(cols, ref, window):
     early = ref["t"] <= window
-    return {"slider_x_m": float(np.abs(cols["slider_x"][early] - ref["slider_x"][early]).max()),
-            "force_C_normal_N": float(np.abs(cols["force_C_normal"][early] - ref["force_C_normal"][early]).max())}
+    return {
+        "slider_x_m": float(np.abs(cols["slider_x"][early] - ref["slider_x"][early]).max()),
+        "force_C_normal_N": float(np.abs(cols["force_C_normal"][early] - ref["force_C_normal"][early]).max()),
+    }
 
 
 def main(argv=None):
@@ -60,26 +63,48 @@ def main(argv=None):
     print("reference (tsit5, 1e-10) ...", flush=True)
     ref, ref_wall, _, ref_steps, _ = paper_run(mech, args.t1, "tsit5", 1e-10)
     check, *_ = paper_run(mech, args.t1, "rodas4", 1e-9)
-    report = {"machine": {"platform": platform.platform(), "jax": jax.__version__, "device": str(jax.devices()[0]),
-                          "cpus_usable": len(os.sched_getaffinity(0)), **runtime.describe()},
-              "t1_s": args.t1, "error_window_s": args.error_window,
-              "reference": {"solver": "tsit5", "tol": 1e-10, "wall_s": ref_wall, "steps": ref_steps,
-                            "error_of_rodas4_1e-9": errors(check, ref, args.error_window)},
-              "runs": []}
+    report = {
+        "machine": {
+            "platform": platform.platform(),
+            "jax": jax.__version__,
+            "device": str(jax.devices()[0]),
+            "cpus_usable": len(os.sched_getaffinity(0)),
+            **runtime.describe(),
+        },
+        "t1_s": args.t1,
+        "error_window_s": args.error_window,
+        "reference": {
+            "solver": "tsit5",
+            "tol": 1e-10,
+            "wall_s": ref_wall,
+            "steps": ref_steps,
+            "error_of_rodas4_1e-9": errors(check, ref, args.error_window),
+        },
+        "runs": [],
+    }
     for solver, tols in RUNS.items():
         for tol in tols:
             cols, wall, compile_s, steps, rejected = paper_run(mech, args.t1, solver, tol)
-            row = {"solver": solver, "tol": tol, "wall_s": wall, "compile_s": compile_s, "steps": steps,
-                   "rejected": rejected,
-                   "error": errors(cols, ref, args.error_window)}
+            row = {
+                "solver": solver,
+                "tol": tol,
+                "wall_s": wall,
+                "compile_s": compile_s,
+                "steps": steps,
+                "rejected": rejected,
+                "error": errors(cols, ref, args.error_window),
+            }
             report["runs"].append(row)
-            print(f"{solver:7s} {tol:7.0e}  {wall:6.3f} s (compile {compile_s:4.1f} s)  {steps:7d} steps  slider error "
-                  f"{row['error']['slider_x_m']:.2e} m  force C error {row['error']['force_C_normal_N']:.2e} N",
-                  flush=True)
+            print(
+                f"{solver:7s} {tol:7.0e}  {wall:6.3f} s (compile {compile_s:4.1f} s)  {steps:7d} steps  slider error "
+                f"{row['error']['slider_x_m']:.2e} m  force C error {row['error']['force_C_normal_N']:.2e} N",
+                flush=True,
+            )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(report, indent=2))
 
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -88,8 +113,13 @@ def main(argv=None):
         rows = [r for r in report["runs"] if r["solver"] == solver]
         ax.loglog([r["error"]["slider_x_m"] for r in rows], [r["wall_s"] for r in rows], "o-", label=solver)
         for r in rows:
-            ax.annotate(f"{r['tol']:.0e}", (r["error"]["slider_x_m"], r["wall_s"]), fontsize=7,
-                        textcoords="offset points", xytext=(4, 4))
+            ax.annotate(
+                f"{r['tol']:.0e}",
+                (r["error"]["slider_x_m"], r["wall_s"]),
+                fontsize=7,
+                textcoords="offset points",
+                xytext=(4, 4),
+            )
     ax.set_xlabel(f"max |slider x error| over the first {args.error_window * 1e3:g} ms, m")
     ax.set_ylabel(f"wall time of the {args.t1:g} s paper run, s")
     ax.set_title("work-precision (labels: rtol = atol)")

@@ -14,8 +14,9 @@ import time
 from pathlib import Path
 
 from . import __version__, config
-from .params import ParameterError, paper
-from .solve import DEFAULT_SOLVER, SOLVERS, SimulationError
+from .errors import CorruptFileError
+from .params import ParameterError, paper, parameter_unit
+from .solve import DEFAULTS, SOLVERS, SimulationError
 
 
 def _simulate_parser(sub):
@@ -23,21 +24,42 @@ def _simulate_parser(sub):
         "simulate",
         help="simulate the clearance mechanism and write data, summary and figures",
         description="Simulate the offset slider-crank with clearance joints (paper defaults unless "
-                    "--config/--set say otherwise) and write trajectory.csv, config.toml, "
-                    "summary.json and figures/ into --out.",
+        "--config/--set say otherwise) and write trajectory.csv, config.toml, "
+        "summary.json and figures/ into --out.",
     )
     p.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
     p.add_argument("--out", type=Path, default=Path("runs/paper"), help="run directory (default: runs/paper)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a parameter, e.g. --set rod_length=0.41 --set contact.law=flores (repeatable)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a parameter, e.g. --set rod_length=0.41 --set contact.law=flores (repeatable)",
+    )
     p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
     p.add_argument("--t1", type=float, default=0.4, help="simulated time, s (default 0.4 = 4 revolutions at 600 rpm)")
-    p.add_argument("--samples-per-degree", type=float, default=10.0,
-                   help="output samples per degree of crank angle (default 10)")
-    p.add_argument("--solver", choices=sorted(SOLVERS), default=DEFAULT_SOLVER, help=f"ODE solver (default {DEFAULT_SOLVER})")
-    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance on the scaled state (default 1e-6)")
-    p.add_argument("--atol", type=float, default=1e-6, help="absolute tolerance on the scaled state (default 1e-6)")
-    p.add_argument("--max-steps", type=int, default=2_000_000, help="solver step budget (default 2e6)")
+    p.add_argument(
+        "--samples-per-degree", type=float, default=10.0, help="output samples per degree of crank angle (default 10)"
+    )
+    p.add_argument(
+        "--solver", choices=sorted(SOLVERS), default=DEFAULTS.solver, help=f"ODE solver (default {DEFAULTS.solver})"
+    )
+    p.add_argument(
+        "--rtol",
+        type=float,
+        default=DEFAULTS.rtol,
+        help=f"relative tolerance on the scaled state (default {DEFAULTS.rtol:g})",
+    )
+    p.add_argument(
+        "--atol",
+        type=float,
+        default=DEFAULTS.atol,
+        help=f"absolute tolerance on the scaled state (default {DEFAULTS.atol:g})",
+    )
+    p.add_argument(
+        "--max-steps", type=int, default=DEFAULTS.max_steps, help=f"solver step budget (default {DEFAULTS.max_steps})"
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -47,6 +69,7 @@ def run_simulate(args) -> int:
     import math
 
     import jax
+    import numpy as np
 
     from . import outputs, plots, solve
 
@@ -65,8 +88,19 @@ def run_simulate(args) -> int:
     config.save(mech, out / "config.toml")
 
     start = time.perf_counter()
-    sim = solve.simulate(mech, args.t1, n_samples=n_samples, solver=args.solver, rtol=args.rtol,
-                         atol=args.atol, max_steps=args.max_steps, progress=not args.quiet)
+    options = solve.SolveOptions(solver=args.solver, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+    # Metrics after the first revolution (the start-up impacts left out); a run that
+    # ends within it is summarised over its whole length, and says so.
+    period = float(mech.period)
+    after_first = args.t1 > period
+    sim = solve.simulate(
+        mech,
+        args.t1,
+        n_samples=n_samples,
+        options=options,
+        progress=not args.quiet,
+        metrics_start=period if after_first else 0.0,
+    )
     jax.block_until_ready(sim.ys)
     wall = time.perf_counter() - start
     cols = outputs.trajectory(sim)
@@ -77,32 +111,56 @@ def run_simulate(args) -> int:
         for row in zip(*(cols[k] for k in outputs.COLUMNS)):
             writer.writerow([f"{v:.10g}" for v in row])
 
+    metrics = {**outputs.summary_metrics(sim), "window_end_s": float(cols["t"][-1])}
+    window = _window_label(metrics, period)
+    i0 = int(np.searchsorted(cols["t"], metrics["window_start_s"]))
     summary = {
         "jaxcrank_version": __version__,
         "versions": _versions(),
-        "solver": {"name": args.solver, "rtol": args.rtol, "atol": args.atol,
-                   "steps": int(sim.num_steps), "rejected_steps": int(sim.num_rejected),
-                   "result": "successful"},
+        "solver": {
+            "name": args.solver,
+            "rtol": args.rtol,
+            "atol": args.atol,
+            "steps": int(sim.num_steps),
+            "rejected_steps": int(sim.num_rejected),
+            "result": "successful",
+        },
         "wall_time_s": wall,
         "wall_time_includes": "compilation, solve, progress bar",
         "simulated_time_s": args.t1,
         "samples": n_samples,
-        "metrics": outputs.metrics(cols, mech),
-        "energy_balance_after_first_revolution": outputs.energy_balance(
-            cols, i0=int(min(len(cols["t"]) - 1, round(360 * args.samples_per_degree)))),
+        "metrics_window": window,
+        "metrics": metrics,
+        "energy_balance": {
+            "from_s": float(cols["t"][i0]),
+            "to_s": float(cols["t"][-1]),
+            **outputs.energy_balance(cols, i0=i0),
+        },
         "units": outputs.COLUMNS,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     if not args.no_figures:
-        clearances = {j: 0.0 if getattr(mech, f"joint_{j}").ideal else float(getattr(mech, f"joint_{j}").clearance) for j in "BC"}
+        clearances = {
+            j: 0.0 if getattr(mech, f"joint_{j}").ideal else float(getattr(mech, f"joint_{j}").clearance) for j in "BC"
+        }
         plots.save_figures(cols, clearances, out / "figures")
     m = summary["metrics"]
     print(f"wrote {out}/ (trajectory.csv, config.toml, summary.json{'' if args.no_figures else ', figures/'})")
     print(f"  {int(sim.num_steps)} steps ({int(sim.num_rejected)} rejected) in {wall:.1f} s")
-    print(f"  after the first revolution: max |rod x dev| = {m['max_abs_rod_x_deviation_m'] * 1e3:.3f} mm, "
-          f"max |slider x dev| = {m['max_abs_slider_x_deviation_m'] * 1e3:.3f} mm, "
-          f"RMS transmission-angle error = {m['rms_transmission_angle_error_deg']:.4f} deg")
+    print(
+        f"  {window}: max |rod x dev| = {m['max_abs_rod_x_deviation_m'] * 1e3:.3f} mm, "
+        f"max |slider x dev| = {m['max_abs_slider_x_deviation_m'] * 1e3:.3f} mm, "
+        f"RMS transmission-angle error = {m['rms_transmission_angle_error_deg']:.4f} deg"
+    )
     return 0
+
+
+def _window_label(metrics: dict, period: float) -> str:
+    """What the metrics window of :func:`jaxcrank.outputs.summary_metrics` was, in words."""
+    start, end = metrics["window_start_s"], metrics["window_end_s"]
+    if start == 0.0:
+        return f"over the whole run, 0 to {end:g} s (shorter than one crank revolution, {period:g} s)"
+    return f"after the first revolution ({start:g} to {end:g} s)"
 
 
 SWEEP_SPEC_HELP = """\
@@ -132,21 +190,31 @@ device is used (a GPU machine's GPUs). Several machines: see README, "Sweeps on 
 
 def _sweep_parser(sub):
     p = sub.add_parser(
-        "sweep", help="simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo), alone or in vmap batches",
+        "sweep",
+        help="simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo), alone or in vmap batches",
         description="Run a sweep over mechanism parameters and write table.csv (one row per design: "
-                    "parameters, status, headline metrics), summary.json and figures/ into --out.",
-        epilog=SWEEP_SPEC_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+        "parameters, status, headline metrics), summary.json and figures/ into --out.",
+        epilog=SWEEP_SPEC_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--spec", type=Path, required=True, help="sweep spec TOML (see below)")
     p.add_argument("--out", type=Path, default=Path("runs/sweep"), help="output directory (default runs/sweep)")
     p.add_argument("--resume", action="store_true", help="continue the sweep in --out where it stopped")
-    p.add_argument("--distributed", action="store_true",
-                   help="join a jax.distributed job first: under Slurm / Open MPI / Kubernetes the cluster "
-                        "is detected; otherwise give --coordinator, --num-processes and --process-id")
+    p.add_argument(
+        "--distributed",
+        action="store_true",
+        help="join a jax.distributed job first: under Slurm / Open MPI / Kubernetes the cluster "
+        "is detected; otherwise give --coordinator, --num-processes and --process-id",
+    )
     p.add_argument("--coordinator", metavar="HOST:PORT", help="address of process 0 (implies --distributed)")
     p.add_argument("--num-processes", type=int, help="processes in the job (with --coordinator)")
     p.add_argument("--process-id", type=int, help="this process's rank, 0 .. num-processes - 1 (with --coordinator)")
-    p.add_argument("--workers", type=int, default=1,
-                   help="local processes solving designs in parallel, e.g. one per CPU core (default 1)")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="local processes solving designs in parallel, e.g. one per CPU core (default 1)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -154,34 +222,56 @@ def _sweep_parser(sub):
 def run_sweep(args) -> int:
     import jax
 
-    from . import plots, sweep
+    from . import metrics, plots, sweep
+    from . import spec as spec_module
 
     if args.distributed or args.coordinator:
-        jax.distributed.initialize(coordinator_address=args.coordinator, num_processes=args.num_processes,
-                                   process_id=args.process_id)
-    spec = sweep.load_spec(args.spec)
+        jax.distributed.initialize(
+            coordinator_address=args.coordinator, num_processes=args.num_processes, process_id=args.process_id
+        )
+    spec = spec_module.load_spec(args.spec)
     out = args.out
     if jax.process_index() == 0:
         out.mkdir(parents=True, exist_ok=True)
         (out / "spec.toml").write_text(args.spec.read_text())
     start = time.perf_counter()
-    table = sweep.run(spec.base, spec.names, spec.designs, spec.settings, out=out, resume=args.resume,
-                      chunk=spec.chunk, workers=args.workers, progress=not args.quiet)
+    table = sweep.run(
+        spec.base,
+        spec.names,
+        spec.designs,
+        spec.settings,
+        out=out,
+        resume=args.resume,
+        chunk=spec.chunk,
+        workers=args.workers,
+        progress=not args.quiet,
+    )
     wall = time.perf_counter() - start
     if jax.process_index() != 0:
         return 0
     summary = sweep.summarize(table)
-    summary.update({"sampling": spec.sampling, "parameters": spec.names, "wall_time_s_this_call": wall,
-                    "devices": jax.device_count(), "processes": jax.process_count(), "workers": args.workers,
-                    "chunk": spec.chunk if spec.chunk is not None else sweep.default_chunk(),
-                    "settings": dataclasses.asdict(spec.settings), "versions": _versions(),
-                    "metric_meanings": sweep.METRICS})
+    summary.update(
+        {
+            "sampling": spec.sampling,
+            "parameters": spec.names,
+            "wall_time_s_this_call": wall,
+            "devices": jax.device_count(),
+            "processes": jax.process_count(),
+            "workers": args.workers,
+            "chunk": spec.chunk if spec.chunk is not None else sweep.default_chunk(),
+            "settings": dataclasses.asdict(spec.settings),
+            "versions": _versions(),
+            "metric_meanings": metrics.meanings(),
+        }
+    )
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    param_cols = [f"{n}_{sweep.parameter_unit(n)}" for n in spec.names]
+    param_cols = [f"{n}_{parameter_unit(n)}" for n in spec.names]
     files = plots.sweep_figures(table, spec.sampling, param_cols, spec.metrics, out / "figures")
     counts = summary["status_counts"]
-    print(f"wrote {out}/ (table.csv, summary.json, figures/: {len(files)} PNGs): {summary['designs']} designs, "
-          + ", ".join(f"{k} {v}" for k, v in counts.items() if v))
+    print(
+        f"wrote {out}/ (table.csv, summary.json, figures/: {len(files)} PNGs): {summary['designs']} designs, "
+        + ", ".join(f"{k} {v}" for k, v in counts.items() if v)
+    )
     return 0
 
 
@@ -193,8 +283,14 @@ def _versions():
 
     from . import runtime
 
-    return {"python": platform.python_version(), "jax": jax.__version__, "diffrax": diffrax.__version__,
-            "equinox": equinox.__version__, "numpy": numpy.__version__, "xla": runtime.describe()}
+    return {
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "diffrax": diffrax.__version__,
+        "equinox": equinox.__version__,
+        "numpy": numpy.__version__,
+        "xla": runtime.describe(),
+    }
 
 
 def main(argv=None) -> int:
@@ -214,8 +310,12 @@ def main(argv=None) -> int:
             return run_sweep(args)
         if args.command == "optimize":
             return optim_cli.run(args)
-    except (ParameterError, SimulationError, FileNotFoundError) as err:
+    except (ParameterError, SimulationError, CorruptFileError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:  # unwritable or full output directory, missing input file, ...
+        where = f": {err.filename}" if err.filename else ""
+        print(f"jaxcrank: error: {err.strerror or err}{where}", file=sys.stderr)
         return 2
     return 1
 

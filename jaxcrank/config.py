@@ -16,14 +16,20 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
+from .laws import CONTACT_LAWS, FRICTION_LAWS, AbstractContactLaw, AbstractFrictionLaw
 from .params import Contact, Friction, Joint, Material, Mechanism, ParameterError
 
 _PARTS = {
-    "joint_B": Joint, "joint_C": Joint,
-    "crank_material": Material, "rod_material": Material, "slider_material": Material,
-    "contact": Contact, "friction": Friction,
+    "joint_B": Joint,
+    "joint_C": Joint,
+    "crank_material": Material,
+    "rod_material": Material,
+    "slider_material": Material,
+    "contact": Contact,
+    "friction": Friction,
 }
-_STRING_FIELDS = {"law"}
+# laws are Modules in Python and names in TOML / on the command line
+_LAWS = {"contact": ("contact law", CONTACT_LAWS), "friction": ("friction law", FRICTION_LAWS)}
 _BOOL_FIELDS = {"ideal"}
 
 
@@ -32,6 +38,8 @@ def _fields(cls):
 
 
 def _plain(value):
+    if isinstance(value, (AbstractContactLaw, AbstractFrictionLaw)):
+        return value.name
     if isinstance(value, (bool, str)):
         return value
     arr = np.asarray(value)
@@ -54,10 +62,13 @@ def to_dict(mech: Mechanism) -> dict:
 
 def _convert(section: str, key: str, value):
     where = f"{section}.{key}" if section else key
-    if key in _STRING_FIELDS:
+    if key == "law" and section in _LAWS:
+        what, registry = _LAWS[section]
         if not isinstance(value, str):
             raise ParameterError(f"{where} must be a string, got {value!r}")
-        return value
+        if value not in registry:
+            raise ParameterError(f"{what} {value!r} is unknown; valid names: {', '.join(registry)}")
+        return registry[value]()
     if key in _BOOL_FIELDS:
         if not isinstance(value, bool):
             raise ParameterError(f"{where} must be true or false, got {value!r}")
@@ -78,13 +89,25 @@ def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
             for sub, v in value.items():
                 if sub not in merged[key]:
                     raise ParameterError(
-                        f"unknown parameter {key}.{sub}; valid keys in [{key}]: {', '.join(merged[key])}")
+                        f"unknown parameter {key}.{sub}; valid keys in [{key}]: {', '.join(merged[key])}"
+                    )
                 merged[key][sub] = _convert(key, sub, v)
         elif key in merged:
             merged[key] = _convert("", key, value)
         else:
             raise ParameterError(f"unknown parameter {key!r}; valid top-level keys: {', '.join(merged)}")
-    kwargs = {k: (_PARTS[k](**v) if k in _PARTS else v) for k, v in merged.items()}
+    for section in _LAWS:  # the base's laws, written as names by to_dict
+        if isinstance(merged[section]["law"], str):
+            merged[section]["law"] = _convert(section, "law", merged[section]["law"])
+    kwargs = {}
+    for k, v in merged.items():
+        if k not in _PARTS:
+            kwargs[k] = v
+            continue
+        try:
+            kwargs[k] = _PARTS[k](**v)
+        except ParameterError as err:  # name the table: "youngs_modulus" alone does not say whose
+            raise ParameterError(f"[{k}] {err}") from None
     return Mechanism(**kwargs)
 
 
@@ -107,8 +130,10 @@ def load(path) -> Mechanism:
 
 
 def dumps(mech: Mechanism) -> str:
-    header = ("# jaxcrank mechanism, SI units (m, kg, s, rad, N, Pa); crank_speed in rad/s.\n"
-              "# Pass back with `jaxcrank simulate --config FILE` to reproduce a run.\n")
+    header = (
+        "# jaxcrank mechanism, SI units (m, kg, s, rad, N, Pa); crank_speed in rad/s.\n"
+        "# Pass back with `jaxcrank simulate --config FILE` to reproduce a run.\n"
+    )
     return header + tomli_w.dumps(to_dict(mech))
 
 

@@ -109,7 +109,9 @@ def reactions(mech: Mechanism, q, residual, ideal_B: bool, ideal_C: bool):
         return zero, zero
     a = jnp.stack(columns, axis=1)
     normal, rhs = a.T @ a, a.T @ residual
-    lam = linalg.solve_2x2(normal, rhs) if len(columns) == 2 else jnp.linalg.solve(normal, rhs)
+    # plain-op linear algebra: a LAPACK call would take a solver loop that evaluates
+    # outputs (jaxcrank.tracking) off XLA's one-kernel path
+    lam = linalg.solve_2x2(normal, rhs) if len(columns) == 2 else linalg.inverse(normal) @ rhs
     f_b = lam[:2] if ideal_B else zero
     f_c = lam[-2:] if ideal_C else zero
     return f_b, f_c
@@ -123,7 +125,9 @@ def driving_moment_from_pin_force(mech: Mechanism, t, force_on_rod_at_B, contact
     J_crank theta1'' = 0 at constant speed.
     """
     th1 = crank_angle(mech, t)
-    return _cross(contact_point, force_on_rod_at_B) + mech.crank_mass * mech.gravity * 0.5 * mech.crank_length * jnp.cos(th1)
+    return _cross(
+        contact_point, force_on_rod_at_B
+    ) + mech.crank_mass * mech.gravity * 0.5 * mech.crank_length * jnp.cos(th1)
 
 
 def rod_gravity(mech: Mechanism):

@@ -26,8 +26,18 @@ def rebound_ratio(mech: Mechanism, approach_speed=0.5, pin_mass=1.0, rtol=1e-10,
     def field(t, y, args):
         x, v, memory = y
         contact = model.joint_contact(
-            mech, joint, mech.crank_material, mech.rod_material,
-            jnp.stack([x, 0.0]), jnp.stack([v, 0.0]), 0.0, jnp.zeros(2), jnp.zeros(2), 0.0, memory)
+            mech,
+            joint,
+            mech.crank_material,
+            mech.rod_material,
+            jnp.stack([x, 0.0]),
+            jnp.stack([v, 0.0]),
+            0.0,
+            jnp.zeros(2),
+            jnp.zeros(2),
+            0.0,
+            memory,
+        )
         # free flight: d(delta_dot)/dt = 0, so only the relaxation term remains
         return jnp.stack([v, contact.force_on_pin[0] / pin_mass, contact.memory_rate])
 
@@ -37,8 +47,14 @@ def rebound_ratio(mech: Mechanism, approach_speed=0.5, pin_mass=1.0, rtol=1e-10,
     # the bearing (2c / (e v) >= 8 ms) to the opposite wall
     t1 = 1e-6 / approach_speed + 2e-3
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field), diffrax.Dopri8(), 0.0, t1, 1e-8, y0,
+        diffrax.ODETerm(field),
+        diffrax.Dopri8(),
+        0.0,
+        t1,
+        1e-8,
+        y0,
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        saveat=diffrax.SaveAt(t1=True), max_steps=200_000,
+        saveat=diffrax.SaveAt(t1=True),
+        max_steps=200_000,
     )
     return -sol.ys[0, 1] / approach_speed

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-import equinox.internal as eqxi
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
@@ -46,6 +46,12 @@ def solve_2x2(a, b):
     return jnp.stack([a[1, 1] * b[0] - a[0, 1] * b[1], a[0, 0] * b[1] - a[1, 0] * b[0]]) / det
 
 
+class _Transposed(eqx.Module):
+    """Whether a :class:`DenseInverse` state solves with the transposed operator (static)."""
+
+    value: bool = eqx.field(static=True)
+
+
 class DenseInverse(lx.AbstractLinearSolver):
     """A lineax solver for small square systems whose vectors are 1-D arrays: the
     operator is inverted once (:func:`inverse`) and every solve is a product with
@@ -56,7 +62,7 @@ class DenseInverse(lx.AbstractLinearSolver):
         del options
         if operator.in_size() != operator.out_size():
             raise ValueError("DenseInverse needs a square operator")
-        return inverse(operator.as_matrix()), eqxi.Static(False)
+        return inverse(operator.as_matrix()), _Transposed(False)
 
     def compute(self, state, vector, options: dict[str, Any]):
         del options
@@ -68,7 +74,7 @@ class DenseInverse(lx.AbstractLinearSolver):
 
     def transpose(self, state, options: dict[str, Any]):
         inv, transposed = state
-        return (inv, eqxi.Static(not transposed.value)), {}
+        return (inv, _Transposed(not transposed.value)), {}
 
     def conj(self, state, options: dict[str, Any]):
         inv, transposed = state

@@ -36,7 +36,6 @@ import jax.numpy as jnp
 from . import ideal, laws, linalg
 from .params import Joint, Material, Mechanism
 
-
 # --------------------------------------------------------------------------- layout
 
 
@@ -52,6 +51,31 @@ def n_dof(mech: Mechanism) -> int:
 
 def state_size(mech: Mechanism) -> int:
     return 2 * n_dof(mech) + len(clearance_joints(mech)) + 2
+
+
+class State(NamedTuple):
+    """The entries of a state vector in SI units (:func:`unpack`); each with the
+    state's leading axes, if any."""
+
+    deviation: jax.Array  # s, generalized-coordinate deviations from the ideal mechanism (m, rad)
+    deviation_rate: jax.Array  # s', m/s and rad/s
+    approach_memory: jax.Array  # approach-speed memory per clearance joint, m/s
+    driver_work: jax.Array  # work done by the driving moment, J
+    dissipated_work: jax.Array  # work dissipated by contact damping and friction, J
+
+
+def unpack(mech: Mechanism, y) -> State:
+    """The scaled state ``y`` (shape (..., :func:`state_size`)) as a :class:`State` in SI units."""
+    phys = y * state_scales(mech)
+    n, k = n_dof(mech), len(clearance_joints(mech))
+    return State(phys[..., :n], phys[..., n : 2 * n], phys[..., 2 * n : 2 * n + k], phys[..., -2], phys[..., -1])
+
+
+def auxiliary(mech: Mechanism, y):
+    """The state entries after the coordinates and their rates (approach-speed
+    memories, m/s, then driver and dissipated work, J), in SI units, shape
+    (..., state_size - 2 n_dof): what :func:`state_from_eccentricities` takes as ``rest``."""
+    return (y * state_scales(mech))[..., 2 * n_dof(mech) :]
 
 
 def length_scale(mech: Mechanism):
@@ -144,7 +168,7 @@ def joint_accelerations(mech: Mechanism, name: str, q, qd, qdd, t):
     half = _rod_half(mech, q)
     half_ddot = qdd[2] * _perp(half) - qd[2] ** 2 * half
     if name == "B":
-        return -mech.crank_speed**2 * ideal.crank_pin(mech, t), qdd[:2] - half_ddot
+        return -(mech.crank_speed**2) * ideal.crank_pin(mech, t), qdd[:2] - half_ddot
     return jnp.stack([qdd[3], jnp.zeros_like(qdd[3])]), qdd[:2] + half_ddot
 
 
@@ -153,8 +177,8 @@ def eccentricities(mech: Mechanism, t, y):
     d = pin centre - hole centre, shape (2, 2) for (B, C), m, and their rates, m/s."""
     if clearance_joints(mech) != ("B", "C"):
         raise ValueError("eccentricities() needs clearance at both B and C")
-    phys = y * state_scales(mech)
-    q, qd, _ = coordinates(mech, phys[:4], phys[4:8], t)
+    state = unpack(mech, y)
+    q, qd, _ = coordinates(mech, state.deviation, state.deviation_rate, t)
     d, dd = [], []
     for name in ("B", "C"):
         pin, pin_vel, hole, hole_vel = joint_points(mech, name, q, qd, t)
@@ -223,8 +247,9 @@ def memory_target_rate(eccentricity, relative_velocity, relative_acceleration, c
     d_v = jnp.dot(eccentricity, relative_velocity)
     m = jnp.maximum(eps, half)
     m_rate = jnp.where(outside, d_v / jnp.where(outside, eps, 1.0), 0.0)
-    return (jnp.dot(relative_velocity, relative_velocity) + jnp.dot(eccentricity, relative_acceleration)) / m \
-        - d_v * m_rate / m**2
+    return (
+        jnp.dot(relative_velocity, relative_velocity) + jnp.dot(eccentricity, relative_acceleration)
+    ) / m - d_v * m_rate / m**2
 
 
 def _perp(v):
@@ -250,8 +275,19 @@ class JointContact(NamedTuple):
     elastic_energy: jax.Array  # energy stored in the contact, J
 
 
-def joint_contact(mech: Mechanism, joint: Joint, pin_material: Material, hole_material: Material,
-                  pin_pos, pin_vel, pin_omega, hole_pos, hole_vel, hole_omega, memory) -> JointContact:
+def joint_contact(
+    mech: Mechanism,
+    joint: Joint,
+    pin_material: Material,
+    hole_material: Material,
+    pin_pos,
+    pin_vel,
+    pin_omega,
+    hole_pos,
+    hole_vel,
+    hole_omega,
+    memory,
+) -> JointContact:
     """Kinematics and forces of one clearance joint (model.md, paper Eq. 1-13).
 
     ``memory`` is the approach-speed memory state (m/s). Positions in m,
@@ -272,9 +308,9 @@ def joint_contact(mech: Mechanism, joint: Joint, pin_material: Material, hole_ma
     compliance = laws.effective_compliance(pin_material.compliance, hole_material.compliance)
     approach = jnp.maximum(memory, c.min_approach_speed)
     geometry = dict(hole_radius=r_h, pin_radius=r_p, compliance_sum=compliance, exponent=c.exponent)
-    f_n, f_el = laws.normal_force(c.law, delta, delta_dot, approach, c.restitution, **geometry)
+    f_n, f_el = c.law.normal_force(delta, delta_dot, approach, c.restitution, **geometry)
     fr = mech.friction
-    f_t = laws.friction_force(fr.law, v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
+    f_t = fr.law.force(v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
     # Only the relaxation part here; evaluate() adds the target's time derivative.
     target = memory_target(d, v_rel, joint.clearance)
     tracking = memory_tracking(delta, c.freeze_width)
@@ -292,7 +328,7 @@ def joint_contact(mech: Mechanism, joint: Joint, pin_material: Material, hole_ma
         memory_rate=memory_rate,
         memory_tracking=tracking,
         dissipation=(f_n - f_el) * delta_dot - f_t * v_t,
-        elastic_energy=laws.elastic_energy(c.law, delta, **geometry),
+        elastic_energy=c.law.elastic_energy(delta, **geometry),
     )
 
 
@@ -364,11 +400,33 @@ def dynamics(mech: Mechanism, t, y) -> Dynamics:
     for i, name in enumerate(joints):
         pin, pin_vel, hole, hole_vel = joint_points(mech, name, q, qd, t)
         if name == "B":
-            cj = joint_contact(mech, mech.joint_B, mech.crank_material, mech.rod_material,
-                               pin, pin_vel, mech.crank_speed, hole, hole_vel, qd[2], memory[i])
+            cj = joint_contact(
+                mech,
+                mech.joint_B,
+                mech.crank_material,
+                mech.rod_material,
+                pin,
+                pin_vel,
+                mech.crank_speed,
+                hole,
+                hole_vel,
+                qd[2],
+                memory[i],
+            )
         else:
-            cj = joint_contact(mech, mech.joint_C, mech.slider_material, mech.rod_material,
-                               pin, pin_vel, 0.0, hole, hole_vel, qd[2], memory[i])
+            cj = joint_contact(
+                mech,
+                mech.joint_C,
+                mech.slider_material,
+                mech.rod_material,
+                pin,
+                pin_vel,
+                0.0,
+                hole,
+                hole_vel,
+                qd[2],
+                memory[i],
+            )
         f_hole = -cj.force_on_pin
         arm = cj.hole_point - centre
         slider_x = cj.force_on_pin[0] if name == "C" else 0.0
@@ -397,8 +455,9 @@ def dynamics(mech: Mechanism, t, y) -> Dynamics:
     for name in joints:
         cj = contacts[name]
         pin_acc, hole_acc = joint_accelerations(mech, name, q, qd, qdd, t)
-        target_rate = memory_target_rate(cj.eccentricity, velocities[name], pin_acc - hole_acc,
-                                         getattr(mech, f"joint_{name}").clearance)
+        target_rate = memory_target_rate(
+            cj.eccentricity, velocities[name], pin_acc - hole_acc, getattr(mech, f"joint_{name}").clearance
+        )
         memory_rates.append(cj.memory_rate + cj.memory_tracking * target_rate)
 
     residual = mass * qdd - applied
@@ -408,8 +467,17 @@ def dynamics(mech: Mechanism, t, y) -> Dynamics:
     else:
         moment = ideal.driving_moment_from_pin_force(mech, t, react_b, ideal.crank_pin(mech, t))
     dissipation = sum((cj.dissipation for cj in contacts.values()), jnp.zeros(()))
-    rate = jnp.concatenate([sd, sdd, jnp.stack(memory_rates) if k else jnp.zeros(0),
-                            jnp.stack([moment * mech.crank_speed, dissipation])]) / scale
+    rate = (
+        jnp.concatenate(
+            [
+                sd,
+                sdd,
+                jnp.stack(memory_rates) if k else jnp.zeros(0),
+                jnp.stack([moment * mech.crank_speed, dissipation]),
+            ]
+        )
+        / scale
+    )
     return Dynamics(q, qd, qdd, contacts, react_b, react_c, moment, rate)
 
 
@@ -419,13 +487,15 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
     dyn = dynamics(mech, t, y)
     q, qd, qdd, contacts = dyn.q, dyn.qd, dyn.qdd, dyn.contacts
     react_b, react_c, moment, rate = dyn.reaction_B, dyn.reaction_C, dyn.driving_moment, dyn.state_rate
-    phys = y * state_scales(mech)
+    state = unpack(mech, y)
     mass = ideal.mass_matrix(mech)
     th1 = ideal.crank_angle(mech, t)
 
     qi, qdi, qddi = ideal.kinematics(mech, t)
     kinetic = 0.5 * jnp.sum(mass * qd**2)
-    potential = mech.rod_mass * mech.gravity * q[1] + mech.crank_mass * mech.gravity * 0.5 * mech.crank_length * jnp.sin(th1)
+    potential = mech.rod_mass * mech.gravity * q[
+        1
+    ] + mech.crank_mass * mech.gravity * 0.5 * mech.crank_length * jnp.sin(th1)
     zero2, zero = jnp.zeros(2), jnp.zeros(())
 
     def pick(name, field, ideal_value):
@@ -455,22 +525,19 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
         kinetic_energy=kinetic,
         potential_energy=potential,
         contact_energy=sum((cj.elastic_energy for cj in contacts.values()), jnp.zeros(())),
-        driver_work=phys[-2],
-        dissipated_work=phys[-1],
+        driver_work=state.driver_work,
+        dissipated_work=state.dissipated_work,
         state_rate=rate,
     )
 
 
 @jax.jit
 def vector_field(t, y, mech: Mechanism):
-    """dy/dt for diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=mech``.
+    """dy/dt of the scaled state ``y`` (shape (state_size,)) at time ``t`` (s), for
+    diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=mech``.
 
-    Jitted so that a solve holds one call of the field's jaxpr per stage, which JAX
-    linearizes and transposes once, instead of the field's equations inlined at every
-    stage: the benchmark's reverse-mode gradient compiles in 7.0 s (2.6 s of it tracing)
-    instead of 10-13 s (``bench/bench_solvers.py``). XLA inlines the call again: the
-    solve runs at the same speed, the tsit5 paper run to the same bits; a ``vmap`` batch
-    or a rodas4 solve can round differently in the last bit than before.
+    Jitted, so a solve holds one call of the field per solver stage, which JAX
+    linearizes and transposes once (shorter compiles of gradients); XLA inlines it.
     """
     return dynamics(mech, t, y).state_rate
 

@@ -2,8 +2,8 @@
 
 Every number a user may sweep or differentiate is a pytree leaf (``jax.grad``,
 ``jax.vmap`` and optax act on a :class:`Mechanism` directly). Only choices that
-change the structure of the model are static: the contact-law and friction-law
-names, and whether a joint is ideal (which changes the number of degrees of
+change the structure of the model are static: the contact and friction laws
+(leafless equinox Modules, :mod:`jaxcrank.laws`), and whether a joint is ideal (which changes the number of degrees of
 freedom).
 
 All values are SI: metres, kilograms, seconds, radians, newtons, pascals.
@@ -23,15 +23,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-CONTACT_LAWS = (
-    "hybrid",
-    "lankarani_nikravesh",
-    "corrected_damping",
-    "hunt_crossley",
-    "flores",
-    "gonthier",
-)
-FRICTION_LAWS = ("smooth", "ambrosio")
+from .laws import CONTACT_LAWS, FRICTION_LAWS, AbstractContactLaw, AbstractFrictionLaw, Hybrid, SmoothRamp
 
 
 class ParameterError(ValueError):
@@ -63,9 +55,7 @@ def _check(name: str, value, *, low=None, high=None, low_open=True, high_open=Tr
         hi = "inf" if high is None else f"{high:g}"
         interval = f"{'(' if low_open or low is None else '['}{lo}, {hi}{')' if high_open or high is None else ']'}"
         bad = arr[~ok].ravel()[0] if arr.ndim else arr
-        raise ParameterError(
-            f"{name} = {bad:g}{' ' + unit if unit else ''} is outside its valid range {interval}"
-        )
+        raise ParameterError(f"{name} = {bad:g}{' ' + unit if unit else ''} is outside its valid range {interval}")
 
 
 class Material(eqx.Module):
@@ -128,8 +118,10 @@ class Contact(eqx.Module):
     """Normal contact law settings (model.md, "Normal contact force").
 
     Attributes:
-        law: static name, one of ``CONTACT_LAWS``. ``"hybrid"`` is the paper's
-            Eq. 6-8 (Bai & Zhao 2012 stiffness with Eq. 5 damping).
+        law: the normal law, a :class:`jaxcrank.laws.AbstractContactLaw`
+            (TOML/CLI names in ``laws.CONTACT_LAWS``). The default
+            :class:`~jaxcrank.laws.Hybrid` is the paper's Eq. 6-8 (Bai & Zhao 2012
+            stiffness with Eq. 5 damping).
         restitution: coefficient of restitution c_e in (0, 1] that sets the
             hysteresis damping factor chi of the law. The restitution a law
             actually achieves follows chi (see ``laws.achieved_restitution``).
@@ -151,7 +143,7 @@ class Contact(eqx.Module):
             The contact force is zero there, so its value barely affects physics.
     """
 
-    law: str = eqx.field(static=True, default="hybrid")
+    law: AbstractContactLaw = Hybrid()
     restitution: float = 0.9
     exponent: float = 1.5
     min_approach_speed: float = 1e-3
@@ -159,9 +151,10 @@ class Contact(eqx.Module):
     freeze_width: float = 1e-7
 
     def __check_init__(self):
-        if self.law not in CONTACT_LAWS:
+        if not isinstance(self.law, AbstractContactLaw):
             raise ParameterError(
-                f"contact law {self.law!r} is unknown; valid names: {', '.join(CONTACT_LAWS)}"
+                f"contact law {self.law!r} is not a jaxcrank.laws.AbstractContactLaw; pass e.g. "
+                f"laws.Flores() (TOML and --set take the names: {', '.join(CONTACT_LAWS)})"
             )
         _check("restitution", self.restitution, low=0.0, high=1.0, high_open=False)
         _check("exponent", self.exponent, low=1.0, high=3.0, low_open=False, high_open=False)
@@ -177,9 +170,11 @@ class Friction(eqx.Module):
     rising to 1 at ``v1``. The ramp width ``v1 - v0`` is the smoothing width.
 
     Attributes:
-        law: static name: ``"smooth"`` (C2 quintic ramp between v0 and v1, the
-            default for differentiable solves) or ``"ambrosio"`` (the reference
-            linear ramp, with kinks at v0 and v1).
+        law: the ramp, a :class:`jaxcrank.laws.AbstractFrictionLaw`:
+            :class:`~jaxcrank.laws.SmoothRamp` (``"smooth"``, C2 quintic ramp between
+            v0 and v1, the default for differentiable solves) or
+            :class:`~jaxcrank.laws.Ambrosio` (``"ambrosio"``, the reference linear
+            ramp, with kinks at v0 and v1).
         coefficient: dynamic friction coefficient mu, dimensionless, >= 0
             (0 disables friction).
         stick_speed: v0, slip speed below which no friction acts, m/s, >= 0.
@@ -192,18 +187,20 @@ class Friction(eqx.Module):
             still below typical slip speeds (0.1-0.5 m/s). See README.
     """
 
-    law: str = eqx.field(static=True, default="smooth")
+    law: AbstractFrictionLaw = SmoothRamp()
     coefficient: float = 0.1
     stick_speed: float = 1e-4
     slip_speed: float = 1e-2
 
     def __check_init__(self):
-        if self.law not in FRICTION_LAWS:
+        if not isinstance(self.law, AbstractFrictionLaw):
             raise ParameterError(
-                f"friction law {self.law!r} is unknown; valid names: {', '.join(FRICTION_LAWS)}"
+                f"friction law {self.law!r} is not a jaxcrank.laws.AbstractFrictionLaw; pass e.g. "
+                f"laws.Ambrosio() (TOML and --set take the names: {', '.join(FRICTION_LAWS)})"
             )
         _check("friction coefficient", self.coefficient, low=0.0, low_open=False)
         _check("stick_speed", self.stick_speed, low=0.0, low_open=False, unit="m/s")
+        _check("slip_speed", self.slip_speed, low=0.0, unit="m/s")  # NaN and inf fail the comparison below
         v0, v1 = _concrete(self.stick_speed), _concrete(self.slip_speed)
         if v0 is not None and v1 is not None and np.any(v1 <= v0):
             raise ParameterError(
@@ -313,6 +310,7 @@ def with_clearance(mech: Mechanism, clearance_B=None, clearance_C=None) -> Mecha
 
 def _leaf(mech: Mechanism, name: str):
     """(getter, current value) of the numeric parameter at dotted path ``name``."""
+
     def get(m):
         for p in name.split("."):
             m = getattr(m, p)
@@ -321,9 +319,11 @@ def _leaf(mech: Mechanism, name: str):
     try:
         current = get(mech)
     except AttributeError:
-        raise ParameterError(f"unknown design variable {name!r}: use a numeric Mechanism field such as "
-                             "'rod_length', a dotted path such as 'contact.restitution', or "
-                             "'clearance_B' / 'clearance_C'") from None
+        raise ParameterError(
+            f"unknown design variable {name!r}: use a numeric Mechanism field such as "
+            "'rod_length', a dotted path such as 'contact.restitution', or "
+            "'clearance_B' / 'clearance_C'"
+        ) from None
     if isinstance(current, (str, bool, eqx.Module)):
         raise ParameterError(f"design variable {name!r} is not a number")
     return get, current
@@ -362,12 +362,32 @@ def parameter_value(mech: Mechanism, name: str):
 
 
 _UNITS = {
-    "crank_length": "m", "rod_length": "m", "offset": "m", "crank_mass": "kg", "rod_mass": "kg",
-    "slider_mass": "kg", "crank_inertia": "kg_m2", "rod_inertia": "kg_m2", "slider_inertia": "kg_m2",
-    "crank_speed": "rad_s", "initial_crank_angle": "rad", "gravity": "m_s2", "hole_radius": "m",
-    "pin_radius": "m", "clearance_B": "m", "clearance_C": "m", "youngs_modulus": "Pa", "poisson_ratio": "1",
-    "restitution": "1", "exponent": "1", "min_approach_speed": "m_s", "memory_time": "s", "freeze_width": "m",
-    "coefficient": "1", "stick_speed": "m_s", "slip_speed": "m_s",
+    "crank_length": "m",
+    "rod_length": "m",
+    "offset": "m",
+    "crank_mass": "kg",
+    "rod_mass": "kg",
+    "slider_mass": "kg",
+    "crank_inertia": "kg_m2",
+    "rod_inertia": "kg_m2",
+    "slider_inertia": "kg_m2",
+    "crank_speed": "rad_s",
+    "initial_crank_angle": "rad",
+    "gravity": "m_s2",
+    "hole_radius": "m",
+    "pin_radius": "m",
+    "clearance_B": "m",
+    "clearance_C": "m",
+    "youngs_modulus": "Pa",
+    "poisson_ratio": "1",
+    "restitution": "1",
+    "exponent": "1",
+    "min_approach_speed": "m_s",
+    "memory_time": "s",
+    "freeze_width": "m",
+    "coefficient": "1",
+    "stick_speed": "m_s",
+    "slip_speed": "m_s",
 }
 
 
@@ -387,8 +407,11 @@ def float_parameter_names(mech: Mechanism | None = None) -> list[str]:
     for field in dataclasses.fields(mech):
         value = getattr(mech, field.name)
         if isinstance(value, eqx.Module):
-            names += [f"{field.name}.{f.name}" for f in dataclasses.fields(value)
-                      if not isinstance(getattr(value, f.name), (str, bool))]
+            names += [
+                f"{field.name}.{f.name}"
+                for f in dataclasses.fields(value)
+                if not isinstance(getattr(value, f.name), (str, bool, eqx.Module))
+            ]
         elif not isinstance(value, (str, bool)):
             names.append(field.name)
     return names

@@ -33,8 +33,14 @@ def _ideal_vs_clearance(cols, prefix, title):
 def _single(cols, series, ylabel, title):
     fig, ax = plt.subplots(figsize=(9, 4))
     for key, label, style in series:
-        ax.plot(cols["t"], cols[key], lw=style.get("lw", 0.7), ls=style.get("ls", "-"),
-                color=style.get("color"), label=label)
+        ax.plot(
+            cols["t"],
+            cols[key],
+            lw=style.get("lw", 0.7),
+            ls=style.get("ls", "-"),
+            color=style.get("color"),
+            label=label,
+        )
     ax.set_xlabel("t [s]")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -80,14 +86,27 @@ def figures(cols, clearances) -> dict:
     return {
         "rod_x.png": _ideal_vs_clearance(cols, "rod", "rod centre (paper Fig. 4)"),
         "slider_x.png": _ideal_vs_clearance(cols, "slider", "slider (paper Fig. 5)"),
-        "slider_acceleration.png": _single(cols, [("slider_ax", "with clearance", {}),
-                                                  ("ideal_slider_ax", "ideal", {"ls": "--", "color": "k", "lw": 1.2})],
-                                           "slider acceleration x [m/s$^2$]", "slider acceleration (paper Fig. 6)"),
-        "contact_force.png": _single(cols, [("force_C_normal", "joint C", {}), ("force_B_normal", "joint B", {"lw": 0.5})],
-                                     "normal contact force [N]", "contact forces (paper Fig. 7: joint C)"),
-        "driving_moment.png": _single(cols, [("driving_moment", "with clearance", {}),
-                                             ("ideal_driving_moment", "ideal", {"ls": "--", "color": "k", "lw": 1.2})],
-                                      "driving moment [N m]", "driving moment (paper Fig. 8)"),
+        "slider_acceleration.png": _single(
+            cols,
+            [("slider_ax", "with clearance", {}), ("ideal_slider_ax", "ideal", {"ls": "--", "color": "k", "lw": 1.2})],
+            "slider acceleration x [m/s$^2$]",
+            "slider acceleration (paper Fig. 6)",
+        ),
+        "contact_force.png": _single(
+            cols,
+            [("force_C_normal", "joint C", {}), ("force_B_normal", "joint B", {"lw": 0.5})],
+            "normal contact force [N]",
+            "contact forces (paper Fig. 7: joint C)",
+        ),
+        "driving_moment.png": _single(
+            cols,
+            [
+                ("driving_moment", "with clearance", {}),
+                ("ideal_driving_moment", "ideal", {"ls": "--", "color": "k", "lw": 1.2}),
+            ],
+            "driving moment [N m]",
+            "driving moment (paper Fig. 8)",
+        ),
         "pin_trajectories.png": _pin_trajectories(cols, clearances),
         "transmission_angle.png": _transmission(cols),
     }
@@ -106,15 +125,28 @@ def save_figures(cols, clearances, directory) -> list[Path]:
 
 
 # ------------------------------------------------------------------ sweeps
-_UNIT_LABELS = {"_m_s2": "m/s^2", "_kg_m2": "kg m^2", "_rad_s": "rad/s", "_N_m": "N m", "_m_s": "m/s",
-                "_deg": "deg", "_Pa": "Pa", "_rad": "rad", "_kg": "kg", "_m": "m", "_N": "N", "_s": "s", "_1": "-"}
+_UNIT_LABELS = {
+    "_m_s2": "m/s^2",
+    "_kg_m2": "kg m^2",
+    "_rad_s": "rad/s",
+    "_N_m": "N m",
+    "_m_s": "m/s",
+    "_deg": "deg",
+    "_Pa": "Pa",
+    "_rad": "rad",
+    "_kg": "kg",
+    "_m": "m",
+    "_N": "N",
+    "_s": "s",
+    "_1": "-",
+}
 
 
 def _label(col: str) -> str:
     """``rod_length_m`` -> ``rod_length [m]`` (units from the column-name suffix)."""
     for suf, unit in _UNIT_LABELS.items():
         if col.endswith(suf):
-            return f"{col[:-len(suf)]} [{unit}]"
+            return f"{col[: -len(suf)]} [{unit}]"
     return col
 
 
@@ -175,15 +207,20 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
                 sel = ok
                 if sampling == "oat":  # the line of this parameter: the others at their base value
                     others = [o for o in param_cols if o != c]
-                    sel = ok & np.all([np.asarray(table[o]) == np.median(np.asarray(table[o])) for o in others], axis=0) \
-                        if others else ok
+                    sel = (
+                        ok & np.all([np.asarray(table[o]) == np.median(np.asarray(table[o])) for o in others], axis=0)
+                        if others
+                        else ok
+                    )
                 xs = np.unique(x[sel])
                 stats = [y[sel & (x == v)] for v in xs]
                 ax.plot(xs, [s.mean() for s in stats], "o-", ms=3)
                 ax.fill_between(xs, [s.min() for s in stats], [s.max() for s in stats], alpha=0.25)
             ax.set_ylabel(_label(m), fontsize=7)
         axes[-1, 0].set_xlabel(_label(c))
-        axes[0, 0].set_title(f"metrics vs {c}" + (" (band: min-max over the other parameters)"
-                                                   if sampling == "grid" and len(param_cols) > 1 else ""))
+        axes[0, 0].set_title(
+            f"metrics vs {c}"
+            + (" (band: min-max over the other parameters)" if sampling == "grid" and len(param_cols) > 1 else "")
+        )
         save(fig, f"lines_{_label(c).split(' [')[0]}.png")
     return files

@@ -1,50 +1,21 @@
-"""The XLA CPU setting jaxcrank runs with, applied when jaxcrank is imported.
+"""The XLA CPU options jaxcrank runs with, applied when jaxcrank is imported.
 
-Since JAX 0.4.32, XLA's CPU backend runs every kernel of a while loop through its
-thunk runtime: one dispatch per kernel per iteration, with dependency tracking and
-work stealing between threads. A solver step of this model is a few hundred tiny
-kernels, so the dispatches, not the arithmetic, set the cost: 17 us a step on the
-paper run (1.7 s for 0.4 s simulated; ``bench/results/step_cost_thunk_runtime.json``). XLA has a pass
-that compiles a whole while loop into one kernel (the loop's instructions are then
-plain code in one function) when the loop accesses fewer bytes than
-``xla_cpu_small_while_loop_byte_threshold`` (its default is 1 kB). At 1 GB diffrax's
-loop is one kernel and the paper run takes 1.6 us a step (0.16 s,
-``bench/results/step_cost.json``). Loops that
-contain custom calls (LAPACK), scatters or sorts are never compiled this way.
+Two options are added to ``XLA_FLAGS`` by :func:`configure` (on x86 machines):
 
-XLA reads ``XLA_FLAGS`` once, when JAX starts its backend (the first array or
-computation), so :func:`configure` runs at ``import jaxcrank``: it adds the options below to
-``XLA_FLAGS`` unless
+- ``--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=1e9``: XLA
+  compiles a diffrax solver loop into one kernel instead of dispatching each of its
+  small kernels per step through the thunk runtime (the per-step cost is then the
+  arithmetic, not the dispatches);
+- ``--xla_cpu_max_isa=AVX``: no fused multiply-add contraction, so the same arithmetic
+  rounds the same way in every kernel, ``vmap`` lane and batch size (reverse-mode
+  gradients recompute forward steps in another kernel; sweep rows must not depend on
+  their batch).
 
-- the user's ``XLA_FLAGS`` already set them (their values win),
-- ``JAXCRANK_KEEP_XLA_FLAGS=1`` asks jaxcrank to leave ``XLA_FLAGS`` alone, or
-- JAX's backend has already started (then it warns: import jaxcrank before running
-  any JAX computation, or put the option in ``XLA_FLAGS`` before starting Python).
-
-The second option, ``--xla_cpu_max_isa=AVX``, keeps XLA from using fused multiply-add
-(FMA) instructions. Inside a loop compiled as one kernel, LLVM contracts ``a*b + c``
-into an FMA where its vectoriser happens to, so the same arithmetic rounds differently
-in different kernels, in different lanes of a ``vmap`` batch, and for different batch
-sizes. Two things depend on bitwise repeatable arithmetic, and impact chaos amplifies
-the last bit (measured, ``tests/test_sensitivity.py``, ``tests/test_sweep.py``):
-
-- reverse-mode gradients: diffrax's checkpointed adjoint recomputes forward steps in
-  the backward pass, a separate kernel; with FMA the recomputed trajectory drifted from
-  the forward one and the Jacobian of 1 ms windows was 1-10 % off central differences
-  (1e-5 without FMA);
-- sweep tables: a design's numbers depended on its position in the batch and on the
-  batch size (2e-8 relative after 3 ms), so a table changed with ``chunk`` and with the
-  number of devices or processes.
-
-Leaving out FMA costs no measurable speed: ``XLA_FLAGS=--xla_cpu_max_isa=AVX2 python
-bench/step_cost.py`` (AVX2 has FMA; the user's value wins) timed the paper run at 0.22 s
-against 0.16 s without FMA, one run each on one core, where an earlier run had it the
-other way round (0.168 s against 0.176 s): within this machine's run-to-run noise. The option names
-an x86 instruction set; on other machines (e.g. ARM) :func:`configure` sets neither
-option and XLA's defaults apply (the thunk runtime: slower, exact gradients).
-
-Neither option changes what is computed, only how: results differ from XLA's defaults
-by floating-point rounding.
+They are not added when the user's ``XLA_FLAGS`` already sets them (the user's values
+win), when ``JAXCRANK_KEEP_XLA_FLAGS=1``, or when JAX's backend has already started
+(XLA reads ``XLA_FLAGS`` once; :func:`configure` then warns). Neither option changes
+what is computed, only how it is rounded. The measurements behind them are in the
+docs ("XLA runtime").
 """
 
 from __future__ import annotations
@@ -88,6 +59,8 @@ def with_options(flags: str) -> str:
 
 
 def _backend_started() -> bool:
+    # JAX has no public API that says whether a backend has started; this is the
+    # one place jaxcrank reads a private module of another package.
     try:
         from jax._src import xla_bridge
     except ImportError:  # pragma: no cover - layout of a future JAX

@@ -4,26 +4,29 @@ Every numerical choice is an argument of :func:`simulate` with a default; none
 lives in the physics parameters. Tolerances act on the dimensionless state of
 :func:`jaxcrank.model.state_scales` (lengths in clearances, velocities in
 clearance x crank speed), so ``rtol = atol = 1e-6`` asks for a local error of about
-1e-6 of the clearance per step. The start-up impacts amplify it: over the first
-10 ms of the paper run the slider position is 1.2 um off at 1e-6 and 7 nm off at
-1e-7 (``bench/work_precision.py``); after that the motion is chaotic.
+1e-6 of the clearance per step; impacts amplify it (the docs' benchmarks page gives
+the measured global error).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import numbers
 from typing import Any
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
+from jaxtyping import Array, ArrayLike, Float, Int
 
-from . import model
+from . import model, tracking
 from .linalg import DenseInverse
+from .params import Mechanism, ParameterError
 from .rosenbrock import Rodas4
-from .params import Mechanism
 
 SOLVERS = {
     "kvaerno5": diffrax.Kvaerno5,
@@ -34,7 +37,47 @@ SOLVERS = {
     "dopri5": diffrax.Dopri5,
     "dopri8": diffrax.Dopri8,
 }
-DEFAULT_SOLVER = "tsit5"
+
+
+@dataclasses.dataclass(frozen=True)
+class SolveOptions:
+    """The numerical settings of a solve: the one place their defaults live
+    (:func:`simulate`, sweeps, design objectives and the CLI all start from these).
+
+    Attributes:
+        solver: a name in :data:`SOLVERS`.
+        rtol, atol: error tolerances on the dimensionless state
+            (:func:`jaxcrank.model.state_scales`), > 0.
+        dt0: initial step, s, > 0.
+        max_steps: step budget (accepted and rejected steps), >= 1.
+
+    Raises:
+        ParameterError: for an unknown solver or a non-positive setting.
+    """
+
+    solver: str = "tsit5"
+    rtol: float = 1e-6
+    atol: float = 1e-6
+    dt0: float = 1e-6
+    max_steps: int = 500_000
+
+    def __post_init__(self):
+        if self.solver not in SOLVERS:
+            raise ParameterError(f"solver {self.solver!r} is unknown; valid: {', '.join(SOLVERS)}")
+        for name in ("rtol", "atol", "dt0"):
+            value = getattr(self, name)
+            if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
+                raise ParameterError(f"{name} = {value!r} must be a finite number > 0")
+        if not (isinstance(self.max_steps, numbers.Integral) and self.max_steps >= 1):
+            raise ParameterError(f"max_steps = {self.max_steps!r} must be an integer >= 1")
+
+    def replace(self, **changes) -> SolveOptions:
+        """A copy with the given fields changed (``None`` values are ignored)."""
+        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+
+DEFAULTS = SolveOptions()
+DEFAULT_SOLVER = DEFAULTS.solver
 
 
 class SimulationError(RuntimeError):
@@ -46,18 +89,23 @@ class Simulation(eqx.Module):
 
     Attributes:
         mechanism: the parameters that were simulated.
-        ts: sample times, s, shape (n,).
-        ys: scaled state at the sample times, shape (n, state size).
+        ts: sample times, s, shape (n,) (the end time alone, shape (1,), when the
+            samples were not saved).
+        ys: scaled state at those times, shape (n, state size).
         result: diffrax result code (``diffrax.RESULTS``).
         num_steps: accepted steps. num_rejected: rejected steps.
+        metrics: the headline metrics tracked during the solve
+            (:func:`jaxcrank.tracking.finish`: name -> value, units in the name), or
+            ``None`` when the solve did not track them (``metrics_start=None``).
     """
 
     mechanism: Mechanism
-    ts: jax.Array
-    ys: jax.Array
+    ts: Float[Array, " n"]
+    ys: Float[Array, "n state"]
     result: Any
-    num_steps: jax.Array
-    num_rejected: jax.Array
+    num_steps: Int[Array, ""]
+    num_rejected: Int[Array, ""]
+    metrics: dict | None = None
 
     @property
     def ok(self):
@@ -78,58 +126,143 @@ def make_solver(name: str = DEFAULT_SOLVER):
     return cls()
 
 
-def _controller(solver, rtol, atol):
+def step_size_controller(solver, rtol, atol):
+    """The adaptive step-size controller :func:`simulate` uses with ``solver``: PI
+    control for implicit solvers, I control for explicit ones; RMS norm of the scaled
+    error; ``rtol``, ``atol`` on the dimensionless state."""
     implicit = isinstance(solver, diffrax.AbstractImplicitSolver)
     # PI control damps step-size oscillation on stiff problems (Hairer & Wanner IV.8).
     pcoeff, icoeff = (0.3, 0.3) if implicit else (0.0, 1.0)
     return diffrax.PIDController(rtol=rtol, atol=atol, pcoeff=pcoeff, icoeff=icoeff, norm=optx.rms_norm)
 
 
+def _with_tolerances(solver, controller):
+    """An implicit solver's root finder with the controller's tolerances and norm
+    filled in where it takes them from the controller (what ``diffeqsolve`` does for
+    an implicit solver it sees; a :class:`~jaxcrank.tracking.MetricsTracking`
+    wrapper hides the solver from that check)."""
+    if not isinstance(solver, diffrax.AbstractImplicitSolver):
+        return solver
+    finder = solver.root_finder
+    names = [n for n in ("rtol", "atol", "norm") if type(getattr(finder, n)).__name__ == "_UseStepSizeTol"]
+    return eqx.tree_at(
+        lambda s: tuple(getattr(s.root_finder, n) for n in names), solver, tuple(getattr(controller, n) for n in names)
+    )
+
+
 @eqx.filter_jit
-def _solve(mech, ts, y0, solver, controller, dt0, max_steps, adjoint, progress_meter):
+def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, progress_meter, metrics_start):
+    """``ts``: the sample times to save (None: only the end state); ``span``: the
+    first and last sample time and their count (the samples tracked metrics visit)."""
     term = diffrax.ODETerm(model.vector_field)
     y0 = model.initial_state(mech) if y0 is None else y0
-    sol = diffrax.diffeqsolve(
-        term, solver, ts[0], ts[-1], dt0, y0, args=mech,
-        saveat=diffrax.SaveAt(ts=ts), stepsize_controller=controller, adjoint=adjoint,
-        max_steps=max_steps, throw=False, progress_meter=progress_meter,
+    first, last, count = span
+    tracked = metrics_start is not None
+    if tracked:
+        solver = tracking.MetricsTracking(
+            _with_tolerances(solver, controller), first, last, count, t_start=jnp.asarray(metrics_start, dtype=float)
+        )
+    saveat = (
+        diffrax.SaveAt(ts=ts, solver_state=tracked) if ts is not None else diffrax.SaveAt(t1=True, solver_state=tracked)
     )
-    return Simulation(mech, sol.ts, sol.ys, sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"])
+    sol = diffrax.diffeqsolve(
+        term,
+        solver,
+        first,
+        last,
+        dt0,
+        y0,
+        args=mech,
+        saveat=saveat,
+        stepsize_controller=controller,
+        adjoint=adjoint,
+        max_steps=max_steps,
+        throw=False,
+        progress_meter=progress_meter,
+    )
+    tracked_metrics = None
+    if tracked:
+        tracked_metrics = {
+            "window_start_s": jnp.asarray(metrics_start, dtype=float),
+            **tracking.finish(sol.solver_state[1]),
+        }
+    return Simulation(
+        mech,
+        sol.ts,
+        sol.ys,
+        sol.result,
+        sol.stats["num_accepted_steps"],
+        sol.stats["num_rejected_steps"],
+        tracked_metrics,
+    )
 
 
 def sample_times(mech: Mechanism, t1=None, n_samples=None, t0=0.0):
     """Equally spaced sample times (equal crank-angle steps), s. Defaults: four
     revolutions (0.4 s at 600 rpm), one sample every 0.1 degree of crank angle."""
-    period = 2.0 * math.pi / float(mech.crank_speed)
+    period = float(mech.period)
     t1 = 4.0 * period if t1 is None else float(t1)
     if n_samples is None:
         n_samples = int(round((t1 - t0) / period * 3600)) + 1
     return jnp.linspace(t0, t1, n_samples)
 
 
-def simulate(mech: Mechanism, t1=None, *, ts=None, n_samples=None, y0=None, solver=DEFAULT_SOLVER,
-             rtol=1e-6, atol=1e-6, dt0=1e-6, max_steps=500_000, adjoint=None,
-             progress=False, throw=True) -> Simulation:
+def _check_equally_spaced(ts):
+    if ts.shape[0] < 2:
+        raise ParameterError(f"tracking metrics needs at least 2 sample times, got {ts.shape[0]}")
+    if isinstance(ts, jax.core.Tracer):
+        return  # built by a traced caller (sweeps): equally spaced by construction
+    steps = jnp.diff(ts)
+    if not bool(jnp.all(jnp.abs(steps - steps[0]) <= 1e-9 * jnp.abs(steps[0]))):
+        raise ParameterError("tracking metrics (metrics_start) needs equally spaced sample times ts")
+
+
+def simulate(
+    mech: Mechanism,
+    t1=None,
+    *,
+    ts: Float[ArrayLike, " n"] | None = None,
+    n_samples=None,
+    y0: Float[ArrayLike, " state"] | None = None,
+    options: SolveOptions = DEFAULTS,
+    solver=None,
+    rtol=None,
+    atol=None,
+    dt0=None,
+    max_steps=None,
+    adjoint=None,
+    progress=False,
+    throw=True,
+    metrics_start=None,
+    save_samples=True,
+) -> Simulation:
     """Simulate the clearance mechanism from pins-centred rest relative to the
     ideal motion (or from ``y0``).
 
     Args:
         mech: the mechanism.
         t1: end time, s (default four revolutions). Ignored when ``ts`` is given.
-        ts: sample times, s, increasing, starting at the initial time.
+        ts: sample times, s, increasing, starting at the initial time. Without it,
+            ``n_samples`` equally spaced times from 0 to ``t1``.
         n_samples: number of equally spaced samples (default one per 0.1 deg of crank).
         y0: scaled state at ``ts[0]`` (default :func:`jaxcrank.model.initial_state`,
             pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.
-        solver: a name in ``SOLVERS`` or a diffrax solver instance.
-        rtol, atol: error tolerances on the dimensionless state.
-        dt0: initial step, s.
-        max_steps: step budget; exceeding it raises (``throw=True``).
+        options: the numerical settings (:class:`SolveOptions`).
+        solver, rtol, atol, dt0, max_steps: override the field of ``options`` of the
+            same name when given; ``solver`` may also be a diffrax solver instance.
         adjoint: diffrax adjoint (default ``RecursiveCheckpointAdjoint``, exact
             reverse-mode gradients of the discrete solve). For ``jax.jacfwd`` /
             ``jax.jvp`` pass ``diffrax.ForwardMode()``: with a few parameters it is
-            the cheaper gradient (two parameters: 5.3x the forward solve against
-            8.2x for reverse mode, ``bench/bench_solvers.py``).
+            the cheaper gradient.
         progress: show a tqdm progress bar (host callback; CLI runs).
+        metrics_start: when given (s), the solve tracks the headline metrics over
+            ``t > metrics_start`` (:mod:`jaxcrank.tracking`: peaks at every accepted
+            step, RMS over the sample times, which must then be equally spaced) into
+            ``Simulation.metrics``. Forward mode only (no reverse-mode gradient
+            through the tracking).
+        save_samples: store the state at every sample time (default); ``False``
+            keeps only the end state (with ``metrics_start``: memory independent of
+            the number of samples).
         throw: raise :class:`SimulationError` when the solve fails or produces
             non-finite values. With ``throw=False`` inspect ``Simulation.ok``
             (batch sweeps).
@@ -137,38 +270,84 @@ def simulate(mech: Mechanism, t1=None, *, ts=None, n_samples=None, y0=None, solv
     Works under ``jax.jit``, ``jax.grad`` and ``jax.vmap`` (with ``throw=True``
     inside a trace, failures raise through ``equinox.error_if``).
     """
-    if ts is None:
-        ts = sample_times(mech, t1, n_samples)
-    ts = jnp.asarray(ts, dtype=float)
-    if isinstance(solver, str):
-        solver = make_solver(solver)
-    controller = _controller(solver, rtol, atol)
+    if ts is None and not save_samples and metrics_start is not None:
+        # only the span: no array of sample times is built (traceable in t1)
+        if n_samples is None:
+            raise ParameterError("simulate(save_samples=False, ts=None) needs n_samples")
+        last = 4.0 * mech.period if t1 is None else t1
+        span = (jnp.asarray(0.0), jnp.asarray(last, dtype=float), int(n_samples))
+    else:
+        ts = sample_times(mech, t1, n_samples) if ts is None else ts
+        ts = jnp.asarray(ts, dtype=float)
+        span = (ts[0], ts[-1], int(ts.shape[0]))
+    instance = solver if solver is not None and not isinstance(solver, str) else None
+    options = options.replace(
+        solver=None if instance is not None else solver, rtol=rtol, atol=atol, dt0=dt0, max_steps=max_steps
+    )
+    solver = make_solver(options.solver) if instance is None else instance
+    rtol, atol, dt0, max_steps = options.rtol, options.atol, options.dt0, options.max_steps
+    controller = step_size_controller(solver, rtol, atol)
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
     meter = diffrax.TqdmProgressMeter(refresh_steps=5000) if progress else diffrax.NoProgressMeter()
-    sim = _solve(mech, ts, y0, solver, controller, dt0, max_steps, adjoint, meter)
+    if metrics_start is not None:
+        metrics_start = jnp.asarray(metrics_start, dtype=float)  # traced: one compilation for any window
+        if ts is not None:
+            _check_equally_spaced(ts)
+        elif span[2] < 2:
+            raise ParameterError(f"tracking metrics needs n_samples >= 2, got {span[2]}")
+    saved = ts if save_samples else None
+    sim = _solve(mech, saved, span, y0, solver, controller, dt0, max_steps, adjoint, meter, metrics_start)
     if throw:
-        sim = check(sim, max_steps=max_steps)
+        sim = check(sim, max_steps=max_steps, t1=span[1])
     return sim
 
 
-def check(sim: Simulation, max_steps=None) -> Simulation:
-    """Raise :class:`SimulationError` with advice if ``sim`` failed or is not finite."""
+def _progress(sim: Simulation, t1) -> str:
+    """Where a failed solve stopped, as a clause: the requested end time ``t1`` (s;
+    None: not known) and the last sample time the solve reached (after a failure
+    diffrax fills the samples it did not reach with inf)."""
+    ts = np.asarray(sim.ts)
+    reached = ts[np.isfinite(ts)]
+    wanted = "the end time" if t1 is None else f"the requested end time t1 = {float(t1):g} s"
+    if reached.size == 0:
+        return f"before reaching {wanted} (it saved no sample)"
+    return (
+        f"before reaching {wanted} (the last sample it reached is t = {float(reached[-1]):g} s, "
+        f"sample {reached.size} of {ts.size})"
+    )
+
+
+def check(sim: Simulation, max_steps=None, t1=None) -> Simulation:
+    """Raise :class:`SimulationError` with advice if ``sim`` failed or is not finite.
+
+    Args:
+        sim: a solve made with ``throw=False``.
+        max_steps: the step budget it had (named in the message).
+        t1: the requested end time, s (named in the message with the time the
+            solve reached).
+
+    Returns ``sim`` unchanged when it succeeded (inside a trace: with run-time checks).
+    """
     finite = jnp.all(jnp.isfinite(sim.ys))
     if isinstance(finite, jax.core.Tracer):  # inside jit/grad/vmap: fail at run time
-        ys = eqx.error_if(sim.ys, sim.result != diffrax.RESULTS.successful,
-                          "jaxcrank: the solve did not finish (step budget or step size); "
-                          "raise max_steps, loosen rtol/atol or use a smoother friction law")
+        ys = eqx.error_if(
+            sim.ys,
+            sim.result != diffrax.RESULTS.successful,
+            "jaxcrank: the solve did not finish (step budget or step size); "
+            "raise max_steps, loosen rtol/atol or use a smoother friction law",
+        )
         ys = eqx.error_if(ys, jnp.invert(finite), "jaxcrank: the solve produced non-finite values")
         return eqx.tree_at(lambda s: s.ys, sim, ys)
     if sim.result == diffrax.RESULTS.max_steps_reached:
         raise SimulationError(
-            f"the solver used all max_steps={max_steps} steps before reaching t1 = {float(sim.ts[-1]):g} s. "
+            f"the solver used all max_steps={max_steps} steps {_progress(sim, t1)}. "
             "Raise max_steps, shorten t1, loosen rtol/atol, or widen the friction ramp "
             "(friction.slip_speed - friction.stick_speed) to make the problem less stiff."
         )
     if sim.result != diffrax.RESULTS.successful:
         raise SimulationError(
-            f"the solve failed: {sim.result.__str__()}. Try a tighter dt0, the implicit solver "
+            f"the solve failed ({sim.result.__str__()}) {_progress(sim, t1)}. "
+            "Try a tighter dt0, the implicit solver "
             "'kvaerno5', tighter rtol/atol, or check that the contact parameters are physical."
         )
     if not bool(finite):

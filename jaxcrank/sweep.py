@@ -15,7 +15,10 @@ A sweep is a table of designs over named parameters (any name
   metric cells are left empty, never NaN;
 - the table (``table.csv``, one row per design: index, parameters, status,
   headline metrics with their units in the column names) is appended after every
-  batch, so a killed sweep resumed with ``resume=True`` only solves what is missing;
+  batch, each batch in one ``write`` (a killed process leaves whole batches), so a
+  killed sweep resumed with ``resume=True`` only solves what is missing; a table or
+  ``designs.npy`` that is truncated, corrupted or from another sweep raises
+  :class:`~jaxcrank.CorruptFileError` naming the file, never a silent restart;
 - a chunk is a ``jax.Array`` sharded over every device of every process of a
   ``jax.distributed`` job; each device solves its shard with its own compiled solve
   (no per-step collective; see :func:`_evaluate`);
@@ -46,40 +49,29 @@ from __future__ import annotations
 import csv
 import dataclasses
 import functools
+import io
 import itertools
 import math
 import multiprocessing
 import os
+from collections.abc import Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
 from tqdm.auto import tqdm
 
 from . import config
-from .outputs import frames, transmission_angle_deviation
-from .params import Mechanism, ParameterError, get_parameter, parameter_unit, set_parameters
-from .solve import SOLVERS, simulate
-
-#: headline metrics (name -> meaning); units are the name's suffix
-METRICS = {
-    "max_abs_rod_x_deviation_m": "largest |rod-centre x - ideal|",
-    "max_abs_slider_x_deviation_m": "largest |slider x - ideal|",
-    "max_abs_slider_ax_deviation_m_s2": "largest |slider acceleration - ideal|",
-    "peak_contact_force_B_N": "largest normal contact force at B",
-    "peak_contact_force_C_N": "largest normal contact force at C",
-    "peak_driving_moment_N_m": "largest |driving moment|",
-    "rms_driving_moment_deviation_N_m": "RMS of driving moment - ideal driving moment",
-    "rms_slider_x_deviation_m": "RMS of slider x - ideal",
-    "rms_transmission_angle_error_deg": "RMS transmission-angle error (paper Eq. 19)",
-    "max_abs_transmission_angle_error_deg": "largest |transmission angle - ideal|",
-}
+from .errors import CorruptFileError
+from .metrics import METRICS
+from .params import Mechanism, ParameterError, parameter_unit, set_parameters
+from .solve import DEFAULTS, SolveOptions, simulate
 
 STATUSES = ("ok", "max_steps", "solver_failed", "non_finite", "invalid")
 _MESSAGES = {
@@ -99,62 +91,54 @@ class Settings:
         samples_per_revolution: output samples per revolution (3600: every 0.1 deg,
             as ``jaxcrank simulate``); peaks are taken over these samples.
         metrics_from_revolution: metrics cover t > this many revolutions (default 1).
-        solver, rtol, atol, max_steps: as in :func:`jaxcrank.simulate`.
+        solver, rtol, atol, max_steps: the fields of :class:`jaxcrank.solve.SolveOptions`
+            (same defaults), flat here so a sweep spec's ``[simulation]`` table names them.
+
+    Raises:
+        ParameterError: for a setting out of its range.
     """
 
     revolutions: float = 4.0
     samples_per_revolution: int = 3600
     metrics_from_revolution: float = 1.0
-    solver: str = "tsit5"
-    rtol: float = 1e-6
-    atol: float = 1e-6
-    max_steps: int = 500_000
+    solver: str = DEFAULTS.solver
+    rtol: float = DEFAULTS.rtol
+    atol: float = DEFAULTS.atol
+    max_steps: int = DEFAULTS.max_steps
 
     def __post_init__(self):
+        for name in ("revolutions", "samples_per_revolution", "metrics_from_revolution", "rtol", "atol", "max_steps"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+                raise ParameterError(f"{name} = {v!r} must be a finite number")
         if not self.revolutions > 0:
             raise ParameterError(f"revolutions = {self.revolutions:g} must be > 0")
         if not 0 <= self.metrics_from_revolution < self.revolutions:
-            raise ParameterError(f"metrics_from_revolution = {self.metrics_from_revolution:g} must be in "
-                                 f"[0, revolutions = {self.revolutions:g})")
+            raise ParameterError(
+                f"metrics_from_revolution = {self.metrics_from_revolution:g} must be in "
+                f"[0, revolutions = {self.revolutions:g})"
+            )
         if int(self.samples_per_revolution) < 4:
             raise ParameterError(f"samples_per_revolution = {self.samples_per_revolution} must be >= 4")
-        if self.solver not in SOLVERS:
-            raise ParameterError(f"solver {self.solver!r} is unknown; valid: {', '.join(SOLVERS)}")
-        if not (self.rtol > 0 and self.atol > 0 and self.max_steps > 0):
-            raise ParameterError("rtol, atol and max_steps must be positive")
+        _ = self.options  # validates solver, rtol, atol and max_steps
+
+    @property
+    def options(self) -> SolveOptions:
+        """The solver settings as :class:`jaxcrank.solve.SolveOptions`."""
+        return DEFAULTS.replace(solver=self.solver, rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
 
     @property
     def n_samples(self) -> int:
+        """Number of output samples, the start included."""
         return int(round(self.revolutions * self.samples_per_revolution)) + 1
 
+    def sample_times(self, mech: Mechanism):
+        """The output sample times of ``mech``'s run, s (traceable in the crank speed)."""
+        return jnp.linspace(0.0, self.revolutions, self.n_samples) * mech.period
 
-# ------------------------------------------------------------------ metrics
-def headline(sim, t_start) -> dict[str, jax.Array]:
-    """:data:`METRICS` of a simulation over samples with t > ``t_start`` (s);
-    traceable (``vmap``), the same values as :func:`jaxcrank.outputs.metrics`."""
-    f = frames(sim)
-    late = sim.ts > t_start
-    n = jnp.maximum(jnp.sum(late), 1)
-
-    def peak(x):
-        return jnp.max(jnp.where(late, jnp.abs(x), 0.0))
-
-    def rms(x):
-        return jnp.sqrt(jnp.sum(jnp.where(late, x**2, 0.0)) / n)
-
-    ta = transmission_angle_deviation(f.q[:, 2], f.ideal_q[:, 2])
-    return {
-        "max_abs_rod_x_deviation_m": peak(f.q[:, 0] - f.ideal_q[:, 0]),
-        "max_abs_slider_x_deviation_m": peak(f.q[:, 3] - f.ideal_q[:, 3]),
-        "max_abs_slider_ax_deviation_m_s2": peak(f.qdd[:, 3] - f.ideal_qdd[:, 3]),
-        "peak_contact_force_B_N": peak(f.normal_force_B),
-        "peak_contact_force_C_N": peak(f.normal_force_C),
-        "peak_driving_moment_N_m": peak(f.driving_moment),
-        "rms_driving_moment_deviation_N_m": rms(f.driving_moment - f.ideal_driving_moment),
-        "rms_slider_x_deviation_m": rms(f.q[:, 3] - f.ideal_q[:, 3]),
-        "rms_transmission_angle_error_deg": rms(ta),
-        "max_abs_transmission_angle_error_deg": peak(ta),
-    }
+    def metrics_start(self, mech: Mechanism):
+        """Start of the metrics window, s: the metrics cover samples with t > this."""
+        return self.metrics_from_revolution * mech.period
 
 
 def simulate_design(base: Mechanism, names: Sequence[str], x, settings: Settings = Settings()):
@@ -162,14 +146,22 @@ def simulate_design(base: Mechanism, names: Sequence[str], x, settings: Settings
     ``throw=False``. Returns (metrics dict, status code (index into
     :data:`STATUSES`), accepted steps). Traceable; :func:`run` vmaps it."""
     mech = set_parameters(base, names, x)
-    period = 2.0 * math.pi / mech.crank_speed
-    ts = jnp.linspace(0.0, settings.revolutions, settings.n_samples) * period
-    sim = simulate(mech, ts=ts, solver=settings.solver, rtol=settings.rtol, atol=settings.atol,
-                   max_steps=settings.max_steps, throw=False)
-    m = headline(sim, settings.metrics_from_revolution * period)
+    # metrics tracked during the solve: no sample is stored (memory per design is
+    # independent of samples_per_revolution)
+    sim = simulate(
+        mech,
+        settings.revolutions * mech.period,
+        n_samples=settings.n_samples,
+        options=settings.options,
+        throw=False,
+        metrics_start=settings.metrics_start(mech),
+        save_samples=False,
+    )
+    m = {k: sim.metrics[k] for k in METRICS}
     finite = jnp.all(jnp.isfinite(sim.ys)) & jnp.all(jnp.isfinite(jnp.stack(list(m.values()))))
-    status = jnp.where(sim.ok, jnp.where(finite, 0, 3),
-                       jnp.where(sim.result == diffrax.RESULTS.max_steps_reached, 1, 2))
+    status = jnp.where(
+        sim.ok, jnp.where(finite, 0, 3), jnp.where(sim.result == diffrax.RESULTS.max_steps_reached, 1, 2)
+    )
     return m, status, sim.num_steps
 
 
@@ -177,88 +169,6 @@ def validate(mech: Mechanism) -> Mechanism:
     """Re-check every parameter of ``mech`` (raises :class:`ParameterError` naming
     the parameter and its range): ``set_parameter`` does not re-validate."""
     return config.from_dict(config.to_dict(mech))
-
-
-# ------------------------------------------------------------------ samplers
-def _ranges(ranges: Mapping[str, Sequence[float]]):
-    names = list(ranges)
-    lo = np.array([float(ranges[n][0]) for n in names])
-    hi = np.array([float(ranges[n][1]) for n in names])
-    bad = [n for n, a, b in zip(names, lo, hi) if not a <= b]
-    if bad:
-        raise ParameterError(f"range of {bad[0]!r} must be (lower, upper) with lower <= upper")
-    return names, lo, hi
-
-
-def full_factorial(levels: Mapping[str, Sequence[float]]):
-    """Every combination of the given levels: ``(names, designs (N, k))``, SI."""
-    names = list(levels)
-    return names, np.array(list(itertools.product(*[np.asarray(levels[n], float) for n in names])), float)
-
-
-def latin_hypercube(ranges: Mapping[str, Sequence[float]], n: int, seed: int = 0):
-    """``n`` Latin-hypercube samples in the box ``ranges`` (name -> (lower, upper)):
-    each variable's range is cut into ``n`` equal strata, each used once."""
-    names, lo, hi = _ranges(ranges)
-    rng = np.random.default_rng(seed)
-    u = (np.stack([rng.permutation(n) for _ in names], axis=1) + rng.random((n, len(names)))) / n
-    return names, lo + u * (hi - lo)
-
-
-def random_uniform(ranges: Mapping[str, Sequence[float]], n: int, seed: int = 0):
-    """``n`` independent uniform samples in the box ``ranges``."""
-    names, lo, hi = _ranges(ranges)
-    return names, lo + np.random.default_rng(seed).random((n, len(names))) * (hi - lo)
-
-
-def one_at_a_time(base: Mechanism, ranges: Mapping[str, Sequence[float]], points: int = 11):
-    """One line per variable through ``base``: ``points`` equally spaced values of
-    that variable over its range, the others at their ``base`` values."""
-    names, lo, hi = _ranges(ranges)
-    x0 = np.array([get_parameter(base, n) for n in names])
-    rows = []
-    for j in range(len(names)):
-        for v in np.linspace(lo[j], hi[j], points):
-            x = x0.copy()
-            x[j] = v
-            rows.append(x)
-    return names, np.array(rows)
-
-
-@dataclasses.dataclass(frozen=True)
-class Tolerance:
-    """A manufactured parameter: ``nominal`` (SI) within a band ``+-tolerance``.
-
-    ``distribution = "uniform"``: uniform over the band; ``"normal"``: normal with
-    the band as +-3 sigma (99.7 % of parts inside it, the usual process-capability
-    reading of a tolerance)."""
-
-    nominal: float
-    tolerance: float
-    distribution: str = "uniform"
-
-    def __post_init__(self):
-        if self.distribution not in ("uniform", "normal"):
-            raise ParameterError(f"distribution {self.distribution!r} is unknown; valid: 'uniform', 'normal'")
-        if not self.tolerance >= 0:
-            raise ParameterError(f"tolerance = {self.tolerance:g} must be >= 0")
-
-    @property
-    def sigma(self) -> float:
-        """Standard deviation, SI."""
-        return self.tolerance / 3.0 if self.distribution == "normal" else self.tolerance / math.sqrt(3.0)
-
-    def standard(self, rng, n):
-        """``n`` draws of the standardised variable (band = [-1, 1] for uniform, 3 sigma = 1 for normal)."""
-        return rng.uniform(-1.0, 1.0, n) if self.distribution == "uniform" else rng.standard_normal(n) / 3.0
-
-
-def monte_carlo(tolerances: Mapping[str, Tolerance], n: int, seed: int = 0):
-    """``n`` manufactured parts: every parameter drawn from its :class:`Tolerance`."""
-    rng = np.random.default_rng(seed)
-    names = list(tolerances)
-    cols = [tolerances[k].nominal + tolerances[k].tolerance * tolerances[k].standard(rng, n) for k in names]
-    return names, np.stack(cols, axis=1)
 
 
 # ------------------------------------------------------------------ running
@@ -271,6 +181,7 @@ def _batch_fn(names: tuple[str, ...], settings: Settings, batched: bool):
     """The compiled solve of a device's shard: a ``vmap`` over its rows, or (``batched``
     False, a one-row shard) the single design's solve without a batch dimension, which
     on a CPU runs ~2.5x faster than a batch per design (``bench/bench_sweep.py``)."""
+
     def one(base, x):
         m, status, steps = simulate_design(base, names, x, settings)
         return jnp.stack([m[k] for k in METRICS]), status, steps
@@ -286,11 +197,72 @@ def _batch_fn(names: tuple[str, ...], settings: Settings, batched: bool):
     return eqx.filter_jit(shard)
 
 
-def default_chunk() -> int:
-    """Designs per chunk when none is given: one per device on a CPU (solved alone),
-    1024 per device elsewhere (a GPU needs large batches)."""
-    per_device = 1 if jax.default_backend() == "cpu" else 1024
-    return per_device * jax.device_count()
+@functools.lru_cache(maxsize=32)
+def batch_bytes(base: Mechanism, names: tuple[str, ...], settings: Settings, batch: int) -> int:
+    """Device memory, bytes, that XLA plans for solving ``batch`` designs in one ``vmap``
+    batch on the default device (temporaries and outputs of the compiled program)."""
+    names = tuple(names)
+    params, static = eqx.partition(base, eqx.is_array)
+
+    def shard(p, xs):
+        b = eqx.combine(p, static)
+        return jax.vmap(lambda x: simulate_design(b, names, x, settings))(xs)
+
+    xs = jnp.zeros((batch, len(names)))
+    memory = jax.jit(shard).lower(params, xs).compile().memory_analysis()
+    return int(memory.temp_size_in_bytes + memory.output_size_in_bytes)
+
+
+def chunk_that_fits(
+    base: Mechanism, names: Sequence[str], settings: Settings, free_bytes: float, headroom: float = 0.8
+) -> int:
+    """The largest number of designs per device whose batch fits in ``headroom`` times
+    ``free_bytes`` (bytes): XLA's memory plan of batches of 2 and 8 designs gives the
+    fixed and the per-design bytes (a batch's memory grows about linearly with its size;
+    the headroom covers the rest). At least 1."""
+    names = tuple(names)
+    two, eight = batch_bytes(base, names, settings, 2), batch_bytes(base, names, settings, 8)
+    per_design = max((eight - two) / 6.0, 1.0)
+    fixed = max(two - 2.0 * per_design, 0.0)
+    return max(1, int((headroom * free_bytes - fixed) // per_design))
+
+
+def free_device_bytes() -> int | None:
+    """Free memory of the default device, bytes, where the backend reports it (GPUs);
+    ``None`` on a CPU."""
+    stats = jax.devices()[0].memory_stats() if jax.default_backend() != "cpu" else None
+    if not stats or "bytes_limit" not in stats:
+        return None
+    return int(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
+
+
+def default_chunk(base: Mechanism | None = None, names: Sequence[str] = (), settings: Settings | None = None) -> int:
+    """Designs per chunk when none is given: one per device on a CPU (each solved
+    alone); elsewhere (a GPU needs large batches) the largest batch per device that fits
+    its free memory (:func:`chunk_that_fits`, given the sweep), else 1024 per device."""
+    if jax.default_backend() == "cpu":
+        return jax.device_count()
+    free = free_device_bytes()
+    if base is None or settings is None or free is None:
+        return 1024 * jax.device_count()
+    return chunk_that_fits(base, names, settings, free) * jax.device_count()
+
+
+def check_chunk_fits(
+    base: Mechanism, names: Sequence[str], settings: Settings, chunk: int, free_bytes: float | None
+) -> None:
+    """Raise :class:`ParameterError` naming ``chunk`` and the size that would fit when
+    a batch of ``chunk`` designs per device needs more than ``free_bytes`` (no check
+    when ``free_bytes`` is None, e.g. on a CPU, or for one design per device)."""
+    if free_bytes is None or chunk <= 1:
+        return
+    need = batch_bytes(base, tuple(names), settings, chunk)
+    if need > free_bytes:
+        fits = chunk_that_fits(base, names, settings, free_bytes)
+        raise ParameterError(
+            f"chunk = {chunk} designs per device needs {need / 2**30:.2f} GiB of device memory, "
+            f"{free_bytes / 2**30:.2f} GiB are free: use chunk <= {fits} per device"
+        )
 
 
 def _evaluate(base, names, settings, xs):
@@ -309,7 +281,7 @@ def _evaluate(base, names, settings, xs):
     fn = _batch_fn(tuple(names), settings, len(xs) > jax.device_count())
     sharding = NamedSharding(_mesh(), P("designs"))  # rows over all devices of all processes
     per = len(xs) // jax.process_count()
-    local = xs[jax.process_index() * per:(jax.process_index() + 1) * per]
+    local = xs[jax.process_index() * per : (jax.process_index() + 1) * per]
     batch = jax.make_array_from_process_local_data(sharding, local, xs.shape)
     results = [fn(base, s.data) for s in batch.addressable_shards]  # async, one call per device
     outs = []
@@ -326,15 +298,51 @@ def _evaluate(base, names, settings, xs):
 def columns(names: Sequence[str]) -> list[str]:
     """Column names of a sweep table over ``names``: ``index``, one ``<name>_<unit>``
     per parameter, ``status``, ``message``, :data:`METRICS`, ``steps``."""
-    return (["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + ["status", "message"]
-            + list(METRICS) + ["steps"])
+    return ["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + ["status", "message"] + list(METRICS) + ["steps"]
 
 
 def read_table(path) -> dict[str, np.ndarray]:
     """A sweep table (CSV) as columns: numbers as float arrays (empty cells NaN),
-    ``status`` and ``message`` as string arrays; rows sorted by ``index``."""
+    ``status`` and ``message`` as string arrays; rows sorted by ``index``.
+
+    Raises:
+        CorruptFileError: the file has no header, a row with more or fewer cells than
+            the header (a truncated or corrupted file), a cell that is not a number
+            where one belongs, an unknown status or a repeated index; the message
+            names the file and the line.
+    """
+    path = Path(path)
     with open(path, newline="") as f:
-        return _table(list(csv.DictReader(f)))
+        try:
+            lines = list(csv.reader(f))
+        except csv.Error as err:
+            raise CorruptFileError(f"{path}: not a readable CSV table ({err})") from None
+    if not lines or "index" not in lines[0] or "status" not in lines[0]:
+        raise CorruptFileError(f"{path}: no sweep table header (index, ..., status, ...) on line 1")
+    header, rows, seen = lines[0], [], set()
+    for n, cells in enumerate(lines[1:], start=2):
+        if len(cells) != len(header):
+            raise CorruptFileError(
+                f"{path}: line {n} has {len(cells)} cells where the header has "
+                f"{len(header)}: the table is truncated or corrupted"
+            )
+        row = dict(zip(header, cells))
+        for key, v in row.items():
+            if key in ("status", "message"):
+                continue
+            try:
+                float(v) if v != "" else None
+            except ValueError:
+                raise CorruptFileError(f"{path}: line {n}: {key} = {v!r} is not a number") from None
+        if not row["index"].isdigit():
+            raise CorruptFileError(f"{path}: line {n}: index = {row['index']!r} is not a design number")
+        if row["status"] not in STATUSES:
+            raise CorruptFileError(f"{path}: line {n}: unknown status {row['status']!r}")
+        if row["index"] in seen:
+            raise CorruptFileError(f"{path}: line {n}: design index {row['index']} appears twice")
+        seen.add(row["index"])
+        rows.append(row)
+    return _table(rows)
 
 
 def _table(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
@@ -353,9 +361,18 @@ def _table(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
     return out
 
 
-def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Settings(), *, out=None,
-        resume: bool = False, chunk: int | None = None, workers: int = 1,
-        progress: bool = True) -> dict[str, np.ndarray]:
+def run(
+    base: Mechanism,
+    names: Sequence[str],
+    designs,
+    settings: Settings = Settings(),
+    *,
+    out=None,
+    resume: bool = False,
+    chunk: int | None = None,
+    workers: int = 1,
+    progress: bool = True,
+) -> dict[str, np.ndarray]:
     """Simulate every design and return the table (as :func:`read_table`).
 
     Args:
@@ -387,29 +404,33 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
         out = Path(out)
         path = out / "table.csv"
         if path.exists() and not resume:
-            raise ParameterError(f"{out} already holds a sweep (table.csv): pass resume=True (--resume) "
-                                 "to continue it or choose another output directory")
+            raise ParameterError(
+                f"{out} already holds a sweep (table.csv): pass resume=True (--resume) "
+                "to continue it or choose another output directory"
+            )
         if resume and (out / "designs.npy").exists():
-            old = np.load(out / "designs.npy")
+            try:
+                old = np.load(out / "designs.npy")
+            except (ValueError, OSError, EOFError) as err:
+                raise CorruptFileError(
+                    f"{out / 'designs.npy'}: cannot be read ({err}); the sweep cannot be "
+                    "resumed (move the directory away to start over)"
+                ) from None
             if old.shape != designs.shape or not np.array_equal(old, designs):
                 raise ParameterError(f"{out} holds a sweep over other designs: resume needs the same spec")
         if resume and path.exists():
-            done = {int(i) for i in read_table(path).get("index", [])}
+            done = _resumable_rows(path, cols, names, designs)
         if writer:
             out.mkdir(parents=True, exist_ok=True)
-            np.save(out / "designs.npy", designs)
+            _atomic_write(out / "designs.npy", lambda f: np.save(f, designs))
             if not path.exists():
-                with open(path, "w", newline="") as f:
-                    csv.writer(f).writerow(cols)
+                _atomic_write(path, lambda f: f.write(_csv_text([cols]).encode()))
     rows: list[list] = []
 
     def emit(new_rows):
         rows.extend(new_rows)
-        if path is not None and writer:
-            with open(path, "a", newline="") as f:
-                csv.writer(f).writerows(new_rows)
-                f.flush()
-                os.fsync(f.fileno())
+        if path is not None and writer and new_rows:
+            _append(path, _csv_text(new_rows))
 
     def row(i, status, message="", metrics=None, steps=""):
         vals = [repr(float(v)) for v in designs[i]]
@@ -430,9 +451,12 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
 
     # a multiple of the device count; one shape for every chunk (one compilation)
     n_dev = jax.device_count()
-    chunk = default_chunk() if chunk is None else int(chunk)
+    given = chunk is not None
+    chunk = default_chunk(base, names, settings) if chunk is None else int(chunk)
     if chunk < 1:
         raise ParameterError(f"chunk = {chunk} must be >= 1")
+    if given and todo:
+        check_chunk_fits(base, names, settings, -(-chunk // n_dev), free_device_bytes())
     if int(workers) < 1:
         raise ParameterError(f"workers = {workers} must be >= 1")
     if workers > 1 and jax.process_count() > 1:
@@ -440,7 +464,7 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
     chunk = -(-chunk // n_dev) * n_dev
     chunks = []
     for s in range(0, len(todo), chunk):
-        idx = todo[s:s + chunk]
+        idx = todo[s : s + chunk]
         xs = designs[idx]
         if len(idx) < chunk:  # one compiled shape: pad with copies of the last design
             xs = np.concatenate([xs, np.repeat(xs[-1:], chunk - len(idx), axis=0)])
@@ -455,10 +479,15 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
         emit(new)
         bar.update(len(idx))
 
-    with tqdm(total=len(designs), initial=len(done) + len(invalid), desc="designs", unit="design",
-              disable=not (progress and writer)) as bar:
+    with tqdm(
+        total=len(designs),
+        initial=len(done) + len(invalid),
+        desc="designs",
+        unit="design",
+        disable=not (progress and writer),
+    ) as bar:
         if workers > 1 and chunks:
-            _run_in_workers(base, names, settings, chunks, int(workers), record)
+            run_in_workers(base, names, settings, chunks, int(workers), record)
         else:
             for idx, xs in chunks:
                 record(idx, _evaluate(base, names, settings, xs))
@@ -469,6 +498,61 @@ def run(base: Mechanism, names: Sequence[str], designs, settings: Settings = Set
             multihost_utils.sync_global_devices("jaxcrank sweep table written")
         return read_table(path)
     return _table([dict(zip(cols, map(str, r))) for r in rows])
+
+
+def _csv_text(rows) -> str:
+    buf = io.StringIO()
+    csv.writer(buf).writerows(rows)
+    return buf.getvalue()
+
+
+def _append(path: Path, text: str) -> None:
+    """Append ``text`` with one ``write`` call on an ``O_APPEND`` descriptor, then fsync:
+    a process killed at any point leaves the batch's rows either all in the table or
+    none (the kernel finishes a write to a regular file that has started)."""
+    data = text.encode()
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+    try:
+        written = os.write(fd, data)
+        while written < len(data):  # only on a full disk, which then raises
+            written += os.write(fd, data[written:])
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _atomic_write(path: Path, write) -> None:
+    """Write a file through a temporary file and a rename: readers see the old file or
+    the whole new one, never a part."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        write(f)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _resumable_rows(path: Path, cols, names, designs) -> set[int]:
+    """Indices of the designs already in the table at ``path``, after checking that the
+    table belongs to this sweep: its header, indices and parameter values (exact)."""
+    table = read_table(path)
+    with open(path, newline="") as f:
+        header = next(csv.reader(f), None)
+    if header != cols:
+        raise CorruptFileError(
+            f"{path}: its columns {header} are not this sweep's {cols}; the table is "
+            "corrupted or from another sweep (move it away to start over)"
+        )
+    for k, i in enumerate(table.get("index", [])):
+        if not 0 <= i < len(designs):
+            raise CorruptFileError(f"{path}: design index {i} is outside this sweep's 0..{len(designs) - 1}")
+        given = [table[c][k] for c in cols[1 : 1 + len(names)]]
+        if not np.array_equal(given, designs[i], equal_nan=True):
+            raise CorruptFileError(
+                f"{path}: the row of design {i} holds parameters {given}, not this "
+                f"sweep's {list(designs[i])}; the table is corrupted or from another sweep"
+            )
+    return {int(i) for i in table.get("index", [])}
 
 
 _WORKER: dict = {}
@@ -483,12 +567,13 @@ def _worker_solve(xs):
     return _evaluate(_WORKER["base"], _WORKER["names"], _WORKER["settings"], xs)
 
 
-def _run_in_workers(base, names, settings, chunks, workers, record):
+def run_in_workers(base, names, settings, chunks, workers, record):
     """Solve ``chunks`` in ``workers`` spawned processes, at most two chunks queued per
     worker, and ``record`` each as it finishes (the table is sorted when read)."""
     ctx = multiprocessing.get_context("spawn")  # a forked JAX runtime is not safe
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                             initargs=(config.to_dict(base), list(names), settings)) as pool:
+    with ProcessPoolExecutor(
+        workers, mp_context=ctx, initializer=_worker_init, initargs=(config.to_dict(base), list(names), settings)
+    ) as pool:
         pending, queue = {}, iter(chunks)
         for idx, xs in itertools.islice(queue, 2 * workers):
             pending[pool.submit(_worker_solve, xs)] = idx
@@ -504,94 +589,20 @@ def summarize(table: Mapping[str, np.ndarray], quantiles=(0.05, 0.5, 0.95)) -> d
     """Per metric over the ``ok`` designs: mean, std, min, max and quantiles; and
     the count of each status. Units as in the metric names."""
     ok = np.asarray(table["status"]) == "ok"
-    out = {"designs": int(len(ok)), "status_counts": {s: int(np.sum(table["status"] == s)) for s in STATUSES},
-           "metrics": {}}
+    out = {
+        "designs": int(len(ok)),
+        "status_counts": {s: int(np.sum(table["status"] == s)) for s in STATUSES},
+        "metrics": {},
+    }
     for k in METRICS:
         v = np.asarray(table[k])[ok]
         if v.size == 0:
             continue
-        out["metrics"][k] = {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if v.size > 1 else 0.0,
-                             "min": float(v.min()), "max": float(v.max()),
-                             **{f"q{int(round(q * 100)):02d}": float(np.quantile(v, q)) for q in quantiles}}
+        out["metrics"][k] = {
+            "mean": float(v.mean()),
+            "std": float(v.std(ddof=1)) if v.size > 1 else 0.0,
+            "min": float(v.min()),
+            "max": float(v.max()),
+            **{f"q{int(round(q * 100)):02d}": float(np.quantile(v, q)) for q in quantiles},
+        }
     return out
-
-
-# ------------------------------------------------------------------ spec (TOML)
-SAMPLINGS = ("grid", "lhs", "random", "oat", "monte_carlo")
-_SPEC_KEYS = {"sampling", "samples", "points", "seed", "chunk", "metrics", "parameters", "simulation", "mechanism"}
-
-
-@dataclasses.dataclass
-class Spec:
-    """A sweep read from TOML by :func:`load_spec` (see ``jaxcrank sweep --help``)."""
-
-    base: Mechanism
-    sampling: str
-    names: list[str]
-    designs: np.ndarray
-    settings: Settings
-    chunk: int | None  # None: default_chunk()
-    metrics: list[str]
-    tolerances: dict[str, Tolerance]
-
-
-def spec_from_dict(d: Mapping) -> Spec:
-    """Build a :class:`Spec` from a parsed TOML dict; every problem raises
-    :class:`ParameterError` naming the key."""
-    bad = set(d) - _SPEC_KEYS
-    if bad:
-        raise ParameterError(f"unknown sweep spec keys {sorted(bad)}; valid: {sorted(_SPEC_KEYS)}")
-    sampling = d.get("sampling", "grid")
-    if sampling not in SAMPLINGS:
-        raise ParameterError(f"sampling {sampling!r} is unknown; valid: {', '.join(SAMPLINGS)}")
-    base = config.from_dict(d.get("mechanism", {}))
-    sim = dict(d.get("simulation", {}))
-    fields = {f.name for f in dataclasses.fields(Settings)}
-    if set(sim) - fields:
-        raise ParameterError(f"unknown [simulation] keys {sorted(set(sim) - fields)}; valid: {sorted(fields)}")
-    settings = Settings(**sim)
-    metrics = list(d.get("metrics", METRICS))
-    if set(metrics) - set(METRICS):
-        raise ParameterError(f"unknown metrics {sorted(set(metrics) - set(METRICS))}; valid: {list(METRICS)}")
-    params = d.get("parameters", {})
-    if not params:
-        raise ParameterError("a sweep spec needs at least one [parameters.<name>] table")
-    for name in params:
-        parameter_unit(name)  # raises on unknown names
-    n, seed = int(d.get("samples", 64)), int(d.get("seed", 0))
-    tolerances = {}
-
-    def rng(name, p):
-        if "lower" not in p or "upper" not in p:
-            raise ParameterError(f"[parameters.{name}] needs lower and upper for sampling = {sampling!r}")
-        return float(p["lower"]), float(p["upper"])
-
-    if sampling == "grid":
-        levels = {}
-        for name, p in params.items():
-            if "values" in p:
-                levels[name] = [float(v) for v in p["values"]]
-            else:
-                lo, hi = rng(name, p)
-                levels[name] = np.linspace(lo, hi, int(p.get("points", 5))).tolist()
-        names, designs = full_factorial(levels)
-    elif sampling in ("lhs", "random"):
-        ranges = {name: rng(name, p) for name, p in params.items()}
-        names, designs = (latin_hypercube if sampling == "lhs" else random_uniform)(ranges, n, seed)
-    elif sampling == "oat":
-        ranges = {name: rng(name, p) for name, p in params.items()}
-        names, designs = one_at_a_time(base, ranges, int(d.get("points", 11)))
-    else:
-        for name, p in params.items():
-            if "tolerance" not in p:
-                raise ParameterError(f"[parameters.{name}] needs tolerance (and optionally nominal, "
-                                     "distribution) for sampling = 'monte_carlo'")
-            tolerances[name] = Tolerance(float(p.get("nominal", get_parameter(base, name))), float(p["tolerance"]),
-                                         str(p.get("distribution", "uniform")))
-        names, designs = monte_carlo(tolerances, n, seed)
-    return Spec(base, sampling, names, designs, settings, (int(d["chunk"]) if "chunk" in d else None), metrics, tolerances)
-
-
-def load_spec(path) -> Spec:
-    """Read a sweep spec TOML file (errors name the file)."""
-    return config.load_toml(path, spec_from_dict)

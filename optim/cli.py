@@ -8,7 +8,7 @@ vmap grid over the box with the optimiser's path; two-variable problems) and
 
 Config TOML (every key optional)::
 
-    problem = "paper"            # or "tolerance", "robust"
+    problem = "paper"            # or "tolerance", "robust", "design" (optim/design.py)
     [optimizer]                  # optim.optimize.Settings fields
     method = "adam"
     max_iterations = 30
@@ -25,6 +25,8 @@ Config TOML (every key optional)::
     scatter = [["crank_length", 5e-5, "normal"], ["clearance_C", 5e-5, "uniform"]]  # robust problem
     samples = 8                  # manufactured parts averaged (0: nominal design only)
     seed = 0
+    stroke = 0.240               # design problem: target stroke, m; also stroke_tolerance,
+    weights = [["rms_contact_force_N", 2e-5]]  # min_transmission_deg and term weights
     [mechanism]                  # base mechanism, as in `jaxcrank simulate`'s config.toml
 """
 
@@ -39,22 +41,25 @@ from pathlib import Path
 import tomli_w
 
 from jaxcrank import config as mech_config
+from jaxcrank import reference
 from jaxcrank.params import ParameterError
 
 from .objective import Objective
 from .optimize import METHODS, Settings, optimize
 from .problem import PROBLEMS, Problem
 
-PAPER_OPTIMUM_DEG = 0.097966
+PAPER_OPTIMUM_DEG = reference.value("optimisation", "optimum_deg")
 GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
-PAPER_REDUCTION_PCT = 8.44
+PAPER_REDUCTION_PCT = reference.value("optimisation", "reduction_percent")
 
 
 def add_parser(sub):
     p = sub.add_parser(
-        "optimize", help="minimise the RMS transmission-angle error (paper Eq. 19) with optax",
+        "optimize",
+        help="minimise the RMS transmission-angle error (paper Eq. 19) with optax",
         description="Optimise a design problem (default: the paper's L1, L2 problem) with gradients "
-                    "through the simulation; writes history, figures and result.json into --out.")
+        "through the simulation; writes history, figures and result.json into --out.",
+    )
     p.add_argument("--config", type=Path, help="TOML settings (see optim/cli.py); default: the paper problem")
     p.add_argument("--out", type=Path, default=Path("runs/optimize"), help="run directory (default runs/optimize)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
@@ -64,9 +69,13 @@ def add_parser(sub):
     p.add_argument("--t-end", type=float, help="end of the evaluation window, s (default 0.3)")
     p.add_argument("--windows", type=int, help="ensemble windows for the gradient (0 = all)")
     p.add_argument("--grid", type=int, default=21, help="grid points per axis for the landscape (0: none)")
-    p.add_argument("--grid-from", type=Path, metavar="GRID_CSV",
-                   help="reuse the landscape (Eq. 19 values) of an earlier run's grid.csv over the same box and "
-                        "objective instead of solving the grid again (the cost term is recomputed)")
+    p.add_argument(
+        "--grid-from",
+        type=Path,
+        metavar="GRID_CSV",
+        help="reuse the landscape (Eq. 19 values) of an earlier run's grid.csv over the same box and "
+        "objective instead of solving the grid again (the cost term is recomputed)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -75,12 +84,16 @@ def _settings(args):
     cfg = {}
     resumed = args.resume and (args.out / "optimize.toml").exists() and args.config is None
     if args.config or resumed:
-        with open(args.config or args.out / "optimize.toml", "rb") as f:
-            cfg = tomllib.load(f)
+        path = args.config or args.out / "optimize.toml"
+        try:
+            cfg = tomllib.loads(Path(path).read_text())
+        except tomllib.TOMLDecodeError as err:
+            raise ParameterError(f"{path}: malformed TOML: {err}") from None
     unknown = set(cfg) - {"problem", "optimizer", "objective", "design", "mechanism"}
     if unknown:
-        raise ParameterError(f"unknown optimize config keys {sorted(unknown)}; valid: problem, optimizer, "
-                             "objective, design, mechanism")
+        raise ParameterError(
+            f"unknown optimize config keys {sorted(unknown)}; valid: problem, optimizer, objective, design, mechanism"
+        )
     if args.problem:
         cfg["problem"] = args.problem
     for key, val in (("method", args.method), ("max_iterations", args.iterations)):
@@ -110,9 +123,17 @@ def build(cfg) -> tuple[Problem, Settings]:
         problem = dataclasses.replace(problem, base=mech_config.from_dict(cfg["mechanism"]))
     design = dict(cfg.get("design", {}))
     if design:
-        design = _fields(Problem, "design", design)
-        design = {k: (tuple(tuple(r) for r in v) if k in ("A", "scatter") else tuple(v) if isinstance(v, list) else v)
-                  for k, v in design.items()}
+        design = _fields(type(problem), "design", design)
+        design = {
+            k: (
+                tuple(tuple(r) for r in v)
+                if k in ("A", "scatter", "weights")
+                else tuple(v)
+                if isinstance(v, list)
+                else v
+            )
+            for k, v in design.items()
+        }
         problem = dataclasses.replace(problem, **design)
     settings = Settings(**_fields(Settings, "optimizer", cfg.get("optimizer", {})))
     return problem, settings
@@ -123,14 +144,28 @@ def resolved(problem: Problem, settings: Settings, name: str) -> dict:
         "problem": name,
         "optimizer": dataclasses.asdict(settings),
         "objective": {f.name: getattr(problem.objective, f.name) for f in dataclasses.fields(problem.objective)},
-        "design": {"names": list(problem.names), "lower": list(problem.lower), "upper": list(problem.upper),
-                   "start": list(problem.start) if problem.start is not None else None,
-                   "A": [list(r) for r in problem.A], "b": list(problem.b),
-                   "cost_weight": problem.cost_weight, "cost_reference": problem.cost_reference,
-                   "scatter": [list(e) for e in problem.scatter], "samples": problem.samples,
-                   "seed": problem.seed},
+        "design": {
+            "names": list(problem.names),
+            "lower": list(problem.lower),
+            "upper": list(problem.upper),
+            "start": list(problem.start) if problem.start is not None else None,
+            "A": [list(r) for r in problem.A],
+            "b": list(problem.b),
+            "cost_weight": problem.cost_weight,
+            "cost_reference": problem.cost_reference,
+            "scatter": [list(e) for e in problem.scatter],
+            "samples": problem.samples,
+            "seed": problem.seed,
+            **_design_fields(problem),
+        },
         "mechanism": mech_config.to_dict(problem.base),
     }
+
+
+def _design_fields(problem: Problem) -> dict:
+    """The fields a :class:`~optim.design.DesignProblem` adds to :class:`Problem`."""
+    extra = [f.name for f in dataclasses.fields(problem) if f.name not in {g.name for g in dataclasses.fields(Problem)}]
+    return {k: ([list(e) for e in getattr(problem, k)] if k == "weights" else getattr(problem, k)) for k in extra}
 
 
 def _drop_none(d):
@@ -142,12 +177,21 @@ def run(args) -> int:
 
     cfg = _settings(args)
     problem, settings = build(cfg)
+    # read a reused landscape before the optimisation, so a bad file fails at once
+    reused = (
+        search.read_grid(args.grid_from, problem, args.grid)
+        if args.grid_from and args.grid and problem.n == 2
+        else None
+    )
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     if not args.resume and (out / "checkpoint.npz").exists():
-        raise ParameterError(f"{out} already holds a run (checkpoint.npz): pass --resume to continue it "
-                             "or choose another --out")
-    (out / "optimize.toml").write_text(tomli_w.dumps(_drop_none(resolved(problem, settings, cfg.get("problem", "paper")))))
+        raise ParameterError(
+            f"{out} already holds a run (checkpoint.npz): pass --resume to continue it or choose another --out"
+        )
+    (out / "optimize.toml").write_text(
+        tomli_w.dumps(_drop_none(resolved(problem, settings, cfg.get("problem", "paper"))))
+    )
     tic = time.perf_counter()
     res = optimize(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
     wall = time.perf_counter() - tic
@@ -156,42 +200,57 @@ def run(args) -> int:
 
     grid_info = None
     if args.grid and problem.n == 2:
-        errors = search.read_grid(args.grid_from, problem, args.grid) if args.grid_from else None
-        grid = search.grid_search(problem, n=args.grid, chunk=GRID_CHUNK, progress=not args.quiet, errors=errors)
+        grid = search.grid_search(problem, n=args.grid, chunk=GRID_CHUNK, progress=not args.quiet, errors=reused)
         search.write_grid(out / "grid.csv", problem, grid)
         path = [[h[f"{n}_SI"] for n in problem.names] for h in hist]
-        plots.plot_landscape(grid, problem.names, path, out / "landscape.png", title=problem.description,
-                             final=res["final"])
+        plots.plot_landscape(
+            grid, problem.names, path, out / "landscape.png", title=problem.description, final=res["final"]
+        )
         # the grid's evaluator at the final design: the same compiled solve as the grid (a
         # differently compiled solve of the same design differs by ~0.5 %: impact chaos
         # amplifies last-bit rounding), so the comparison with the grid's best is like for like
         final_same, _ = search.evaluate(problem, [res["final"]], chunk=GRID_CHUNK, progress=False)
-        grid_info = {"points_per_axis": args.grid, "best_design_SI": grid.best.tolist(),
-                     "best_objective_deg": grid.best_value,
-                     "final_objective_grid_evaluator_deg": float(final_same[0]),
-                     "final_over_grid_best": float(final_same[0]) / grid.best_value,
-                     "final_over_grid_best_optimiser_value": res["final_objective"] / grid.best_value,
-                     "failed_designs": int((grid.feasible & ~grid.ok).sum())}
+        grid_info = {
+            "points_per_axis": args.grid,
+            "best_design_SI": grid.best.tolist(),
+            "best_objective_deg": grid.best_value,
+            "final_objective_grid_evaluator_deg": float(final_same[0]),
+            "final_over_grid_best": float(final_same[0]) / grid.best_value,
+            "final_over_grid_best_optimiser_value": res["final_objective"] / grid.best_value,
+            "failed_designs": int((grid.feasible & ~grid.ok).sum()),
+        }
 
     f_start = hist[0]["objective_deg"]
     result = {
-        "problem": problem.description, "names": list(problem.names), "method": settings.method,
-        "converged": res["converged"], "iterations": len(hist),
-        "start_design_SI": [hist[0][f"{n}_SI"] for n in problem.names], "start_objective_deg": f_start,
-        "final_design_SI": res["final"], "final_objective_deg": res["final_objective"],
+        "problem": problem.description,
+        "names": list(problem.names),
+        "method": settings.method,
+        "converged": res["converged"],
+        "iterations": len(hist),
+        "start_design_SI": [hist[0][f"{n}_SI"] for n in problem.names],
+        "start_objective_deg": f_start,
+        "final_design_SI": res["final"],
+        "final_objective_deg": res["final_objective"],
         "reduction_percent": 100.0 * (f_start - res["final_objective"]) / f_start,
-        "wall_seconds_this_call": wall, "grid": grid_info,
-        "paper": {"optimum_deg": PAPER_OPTIMUM_DEG, "reduction_percent": PAPER_REDUCTION_PCT,
-                  "why_ours_differs": (
-                      "The paper's ADAMS model is not fully specified (offset e, restitution, friction, "
-                      "materials, contact smoothing, evaluation window and sample count are not given; "
-                      "model.md lists our readings) and its start design L1 = 150 mm lies outside its own "
-                      "box. Our start is the box centre and our window (t_start, t_end]; the objective "
-                      "itself is Eq. 19 in degrees.")},
+        "wall_seconds_this_call": wall,
+        "grid": grid_info,
+        "paper": {
+            "optimum_deg": PAPER_OPTIMUM_DEG,
+            "reduction_percent": PAPER_REDUCTION_PCT,
+            "why_ours_differs": (
+                "The paper's ADAMS model is not fully specified (offset e, restitution, friction, "
+                "materials, contact smoothing, evaluation window and sample count are not given; "
+                "model.md lists our readings) and its start design L1 = 150 mm lies outside its own "
+                "box. Our start is the box centre and our window (t_start, t_end]; the objective "
+                "itself is Eq. 19 in degrees."
+            ),
+        },
     }
     (out / "result.json").write_text(json.dumps(result, indent=2))
-    print(f"{problem.description}: {f_start:.5f} -> {res['final_objective']:.5f} deg "
-          f"({result['reduction_percent']:.2f} % lower) at "
-          + ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, res["final"]))
-          + (f"; grid best {grid_info['best_objective_deg']:.5f} deg" if grid_info else ""))
+    print(
+        f"{problem.description}: {f_start:.5f} -> {res['final_objective']:.5f} deg "
+        f"({result['reduction_percent']:.2f} % lower) at "
+        + ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, res["final"]))
+        + (f"; grid best {grid_info['best_objective_deg']:.5f} deg" if grid_info else "")
+    )
     return 0

@@ -86,15 +86,18 @@ class Objective(eqx.Module):
 
     def __check_init__(self):
         if not 0.0 <= self.t_start < self.t_end:
-            raise ParameterError(f"objective window must satisfy 0 <= t_start < t_end, got "
-                                 f"t_start = {self.t_start:g} s, t_end = {self.t_end:g} s")
+            raise ParameterError(
+                f"objective window must satisfy 0 <= t_start < t_end, got "
+                f"t_start = {self.t_start:g} s, t_end = {self.t_end:g} s"
+            )
         if self.samples_per_degree <= 0:
             raise ParameterError(f"samples_per_degree = {self.samples_per_degree:g} must be positive")
         if self.method not in ("ensemble", "pathwise"):
             raise ParameterError(f"objective method {self.method!r} is unknown; valid: 'ensemble', 'pathwise'")
         if self.method == "ensemble" and not 0.0 < self.window <= self.t_end - self.t_start:
-            raise ParameterError(f"ensemble window = {self.window:g} s must be in (0, t_end - t_start = "
-                                 f"{self.t_end - self.t_start:g}] s")
+            raise ParameterError(
+                f"ensemble window = {self.window:g} s must be in (0, t_end - t_start = {self.t_end - self.t_start:g}] s"
+            )
 
     def grid(self, mech: Mechanism):
         """(n_start, n_eval, n_window, dt): sample index of t_start, number of samples
@@ -103,8 +106,10 @@ class Objective(eqx.Module):
         try:
             omega = float(mech.crank_speed)
         except (TypeError, jax.errors.ConcretizationTypeError):
-            raise ParameterError("the objective's sample grid needs a concrete crank_speed: build the "
-                                 "mechanism inside the traced function from a fixed base design") from None
+            raise ParameterError(
+                "the objective's sample grid needs a concrete crank_speed: build the "
+                "mechanism inside the traced function from a fixed base design"
+            ) from None
         dt = math.radians(1.0 / self.samples_per_degree) / omega
         n_start = int(round(self.t_start / dt))
         n_eval = int(round((self.t_end - self.t_start) / dt))
@@ -118,7 +123,7 @@ class Objective(eqx.Module):
         return n_start, n_eval, n_window, dt
 
 
-def _eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid):
+def eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid):
     """One solve from the pins-centred start over the objective's sample ``grid``
     (:meth:`Objective.grid`, computed by the caller while the crank speed is still
     concrete): the simulation, the sample index of t_start and the
@@ -126,20 +131,20 @@ def _eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid):
     n_start, n_eval, _, dt = grid
     ts = dt * jnp.arange(n_start + n_eval + 1)
     sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=throw)
-    return sim, n_start, transmission_angle_error(mech, sim.ts[n_start + 1:], sim.ys[n_start + 1:])
+    return sim, n_start, transmission_angle_error(mech, sim.ts[n_start + 1 :], sim.ys[n_start + 1 :])
 
 
 def pathwise_errors(mech: Mechanism, obj: Objective = Objective()):
     """Squared transmission-angle errors (deg^2) at the samples in (t_start, t_end]
     of one solve from the pins-centred start, and whether the solve succeeded
     (``throw=False``: batch callers report failures)."""
-    sim, _, err = _eval_samples(mech, obj, False, obj.grid(mech))
+    sim, _, err = eval_samples(mech, obj, False, obj.grid(mech))
     return err**2, sim.ok & jnp.all(jnp.isfinite(err))
 
 
 def pathwise(mech: Mechanism, obj: Objective = Objective()):
     """Eq. 19 from one solve from the pins-centred start, degrees (raises if the solve fails)."""
-    _, _, err = _eval_samples(mech, obj, True, obj.grid(mech))
+    _, _, err = eval_samples(mech, obj, True, obj.grid(mech))
     return jnp.sqrt(jnp.mean(err**2))
 
 
@@ -164,7 +169,7 @@ def reference(mech: Mechanism, obj: Objective = Objective()):
     value (degrees) and the :class:`Starts` of the ensemble windows."""
     grid = obj.grid(mech)
     mech = jax.lax.stop_gradient(mech)
-    sim, n_start, err = _eval_samples(mech, obj, True, grid)
+    sim, n_start, err = eval_samples(mech, obj, True, grid)
     return jax.lax.stop_gradient(jnp.sqrt(jnp.mean(err**2))), window_starts(sim, n_start, grid, obj)
 
 
@@ -179,7 +184,7 @@ def window_starts(sim, n_start: int, grid, obj: Objective) -> Starts:
     t0s, y0s = sim.ts[idx], sim.ys[idx]
     d, d_rate = jax.vmap(model.eccentricities, in_axes=(None, 0, 0))(mech, t0s, y0s)
     clearance = jnp.stack([mech.joint_B.clearance, mech.joint_C.clearance])
-    rest = y0s[:, 8:] * model.state_scales(mech)[8:]  # SI: the scales change with the clearances
+    rest = model.auxiliary(mech, y0s)  # SI: the scales change with the clearances
     return jax.lax.stop_gradient(Starts(t0s, d, d_rate, rest, clearance))
 
 
@@ -204,8 +209,16 @@ def solve_window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, o
     times (n_window,) s, scaled states (zero where the solve failed, so a failed
     window is reported by the caller, not propagated as NaN) and whether it finished."""
     ts = starts.t[i] + dt * jnp.arange(n_window + 1)
-    sim = simulate(mech, ts=ts, y0=start_state(mech, starts, i), solver=obj.window_solver,
-                   rtol=obj.rtol, atol=obj.atol, max_steps=obj.window_max_steps, throw=False)
+    sim = simulate(
+        mech,
+        ts=ts,
+        y0=start_state(mech, starts, i),
+        solver=obj.window_solver,
+        rtol=obj.rtol,
+        atol=obj.atol,
+        max_steps=obj.window_max_steps,
+        throw=False,
+    )
     ok = sim.ok & jnp.all(jnp.isfinite(sim.ys))
     # the requested times, not sim.ts: a failed diffrax solve fills its ts with inf
     return ts[1:], jnp.where(ok, sim.ys, 0.0)[1:], ok
@@ -231,7 +244,8 @@ def window_gradients(mech: Mechanism, starts: Starts, obj: Objective = Objective
         return _window(eqx.combine(p, static), starts, i, n_window, dt, obj)
 
     (sq, ok), grads = jax.vmap(jax.value_and_grad(one, has_aux=True), in_axes=(None, 0))(
-        params, jnp.arange(starts.t.shape[0]))
+        params, jnp.arange(starts.t.shape[0])
+    )
     return sq, ok, grads
 
 
@@ -243,16 +257,20 @@ def ensemble(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
     # A window the implicit solver cannot finish within its step budget (rare: a
     # stick phase under a large contact force) is left out of the ensemble.
     n_ok = jnp.sum(ok)
-    n_ok = eqx.error_if(n_ok, n_ok < 0.5 * ok.shape[0],
-                        "jaxcrank: more than half of the ensemble windows failed; raise "
-                        "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window")
+    n_ok = eqx.error_if(
+        n_ok,
+        n_ok < 0.5 * ok.shape[0],
+        "jaxcrank: more than half of the ensemble windows failed; raise "
+        "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window",
+    )
     w = ok.astype(sq.dtype)
     # First-order surrogate: value sum(sq), gradient the sum of the window gradients.
     params, _ = eqx.partition(mech, _is_float)
     sg = jax.lax.stop_gradient
     total = sg(jnp.sum(w * sq)) + sum(
         jnp.sum(sg(jnp.tensordot(w, g, axes=1)) * (jnp.asarray(p) - sg(p)))
-        for p, g in zip(jax.tree.leaves(params), jax.tree.leaves(grads)))
+        for p, g in zip(jax.tree.leaves(params), jax.tree.leaves(grads))
+    )
     return jnp.sqrt(total / (n_window * n_ok))
 
 

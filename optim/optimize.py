@@ -16,10 +16,13 @@ Convergence: the projected-gradient step ``|P(u - g) - u|_inf`` (g the scaled
 gradient) below ``gtol``, or the design moving less than ``xtol`` (scaled) for
 ``patience`` consecutive iterations, or ``max_iterations``.
 
-Checkpoint: ``checkpoint.npz`` (iterate, optimiser state, history; replaced
-atomically) and ``history.csv`` are rewritten after every iteration; ``resume=True`` continues from the last finished
-iteration, so a killed run loses at most the iteration in progress and, being
-deterministic, reproduces the uninterrupted history.
+Checkpoint: ``checkpoint.npz`` (iterate, optimiser state, history) and ``history.csv``
+are replaced atomically (temporary file and rename) after every iteration;
+``resume=True`` continues from the last finished iteration, so a killed run loses at
+most the iteration in progress and, being deterministic, reproduces the uninterrupted
+history (``tests/test_faults.py`` kills runs with SIGKILL). A truncated or corrupted
+checkpoint raises :class:`jaxcrank.CorruptFileError` naming the file; it is never
+silently replaced by a fresh start.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ import dataclasses
 import functools
 import json
 import time
+import zipfile
+import zlib
 from pathlib import Path
 
 import jax
@@ -36,6 +41,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 from tqdm.auto import tqdm
+
+from jaxcrank.errors import CorruptFileError
+from jaxcrank.params import ParameterError
 
 from .problem import Problem
 
@@ -77,8 +85,11 @@ class Settings:
 def _optimizer(settings: Settings):
     if settings.method == "adam":
         return optax.adam(settings.learning_rate)
-    return optax.lbfgs(linesearch=optax.scale_by_zoom_linesearch(
-        max_linesearch_steps=settings.max_linesearch_steps, initial_guess_strategy="one"))
+    return optax.lbfgs(
+        linesearch=optax.scale_by_zoom_linesearch(
+            max_linesearch_steps=settings.max_linesearch_steps, initial_guess_strategy="one"
+        )
+    )
 
 
 @functools.lru_cache(maxsize=8)
@@ -95,8 +106,11 @@ def _compiled(problem: Problem, penalty: float):
         p = problem.project(u)
         return inside(p, f0) + penalty * jnp.sum((u - p) ** 2)
 
-    return (jax.jit(jax.value_and_grad(inside)), jax.jit(outside),
-            jax.jit(lambda x: problem.objective_value(x, method="pathwise")))
+    return (
+        jax.jit(jax.value_and_grad(inside)),
+        jax.jit(outside),
+        jax.jit(lambda x: problem.objective_value(x, method="pathwise")),
+    )
 
 
 def _flatten(state):
@@ -106,15 +120,18 @@ def _flatten(state):
 
 def _unflatten(template, arrays):
     leaves, treedef = jax.tree.flatten(template)
-    return jax.tree.unflatten(treedef, [jnp.asarray(arrays[f"leaf{i}"], dtype=np.asarray(x).dtype)
-                                        for i, x in enumerate(leaves)])
+    return jax.tree.unflatten(
+        treedef, [jnp.asarray(arrays[f"leaf{i}"], dtype=np.asarray(x).dtype) for i, x in enumerate(leaves)]
+    )
 
 
 def history_columns(problem: Problem):
-    return (["iteration", "objective_deg", "rms_error_deg", "cost_deg"]
-            + [f"grad_{n}_deg_per_SI" for n in problem.names]
-            + [f"{n}_SI" for n in problem.names]
-            + ["projected_gradient", "step", "seconds"])
+    return (
+        ["iteration", "objective_deg", "rms_error_deg", "cost_deg"]
+        + [f"grad_{n}_deg_per_SI" for n in problem.names]
+        + [f"{n}_SI" for n in problem.names]
+        + ["projected_gradient", "step", "seconds"]
+    )
 
 
 def _write_history(path: Path, problem: Problem, history):
@@ -126,8 +143,14 @@ def _write_history(path: Path, problem: Problem, history):
             w.writerow({c: h[c] for c in cols})
 
 
-def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None = None, resume: bool = False,
-             progress: bool = True, stop_after: int | None = None) -> dict:
+def optimize(
+    problem: Problem,
+    settings: Settings = Settings(),
+    out: Path | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    stop_after: int | None = None,
+) -> dict:
     """Minimise ``problem`` from its start design.
 
     Args:
@@ -141,17 +164,26 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
     (its objective, degrees) and ``last`` (the last iterate, SI).
     """
     opt = _optimizer(settings)
-    value_and_grad, extended, start_value = _compiled(problem, settings.penalty)
+    # the start is not part of the compiled programs: runs from other starts share them
+    value_and_grad, extended, start_value = _compiled(dataclasses.replace(problem, start=None), settings.penalty)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"
     if resume:
         if ckpt is None or not ckpt.exists():
-            raise FileNotFoundError(f"--resume: no checkpoint at {ckpt}; run without --resume first")
+            raise ParameterError(f"--resume: no checkpoint at {ckpt}; run without --resume first")
         u, leaves, meta = load_checkpoint(Path(out))
         if meta["names"] != list(problem.names) or meta["method"] != settings.method:
-            raise ValueError(f"--resume: checkpoint in {out} is for {meta['names']} with {meta['method']}, "
-                             f"not {list(problem.names)} with {settings.method}")
+            raise ParameterError(
+                f"--resume: the checkpoint in {out} is for {meta['names']} with "
+                f"{meta['method']}, not {list(problem.names)} with {settings.method}: resume "
+                "with the run's own settings (optimize.toml) or choose another --out"
+            )
         f0, history = meta["f0"], meta["history"]
-        state = _unflatten(opt.init(u), leaves)
+        try:
+            state = _unflatten(opt.init(u), leaves)
+        except (KeyError, ValueError, TypeError) as err:
+            raise CorruptFileError(
+                f"{ckpt}: the optimiser state does not fit {settings.method} ({err}); the checkpoint is corrupted"
+            ) from None
         quiet, converged = meta["quiet"], meta["converged"]
     else:
         u = problem.start_unit()
@@ -160,8 +192,9 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
 
     done_here = 0
     start_it = len(history)
-    bar = tqdm(total=settings.max_iterations, initial=start_it, desc=f"{settings.method}", unit="it",
-               disable=not progress)
+    bar = tqdm(
+        total=settings.max_iterations, initial=start_it, desc=f"{settings.method}", unit="it", disable=not progress
+    )
     while converged is None and len(history) < settings.max_iterations:
         tic = time.perf_counter()
         value, grad = value_and_grad(u, f0)
@@ -175,11 +208,17 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))
         grad_si = np.asarray(grad) * f0 / np.asarray(problem.span)
-        rec = {"iteration": len(history), "objective_deg": float(value) * f0,
-               "rms_error_deg": float(value) * f0 - cost, "cost_deg": cost,
-               **{f"grad_{n}_deg_per_SI": float(g) for n, g in zip(problem.names, grad_si)},
-               **{f"{n}_SI": float(v) for n, v in zip(problem.names, np.asarray(x))},
-               "projected_gradient": proj_step, "step": step, "seconds": time.perf_counter() - tic}
+        rec = {
+            "iteration": len(history),
+            "objective_deg": float(value) * f0,
+            "rms_error_deg": float(value) * f0 - cost,
+            "cost_deg": cost,
+            **{f"grad_{n}_deg_per_SI": float(g) for n, g in zip(problem.names, grad_si)},
+            **{f"{n}_SI": float(v) for n, v in zip(problem.names, np.asarray(x))},
+            "projected_gradient": proj_step,
+            "step": step,
+            "seconds": time.perf_counter() - tic,
+        }
         history.append(rec)
         quiet = quiet + 1 if step < settings.xtol else 0
         if proj_step < settings.gtol:
@@ -197,27 +236,69 @@ def optimize(problem: Problem, settings: Settings = Settings(), out: Path | None
             break
     bar.close()
     best = min(history, key=lambda h: h["objective_deg"])
-    return {"history": history, "converged": converged, "f0": f0,
-            "final": [best[f"{n}_SI"] for n in problem.names], "final_objective": best["objective_deg"],
-            "last": [history[-1][f"{n}_SI"] for n in problem.names]}
+    return {
+        "history": history,
+        "converged": converged,
+        "f0": f0,
+        "final": [best[f"{n}_SI"] for n in problem.names],
+        "final_objective": best["objective_deg"],
+        "last": [history[-1][f"{n}_SI"] for n in problem.names],
+    }
 
 
 def _checkpoint(out: Path, problem, settings, u, state, history, f0, quiet, converged):
     """One atomic file holds everything a resume needs; history.csv is a copy for people."""
     out.mkdir(parents=True, exist_ok=True)
-    meta = {"names": list(problem.names), "method": settings.method, "f0": f0, "quiet": quiet,
-            "converged": converged, "history": history}
-    arrays = {"u": np.asarray(u), "meta": np.asarray(json.dumps(meta)),
-              **{f"state_{k}": v for k, v in _flatten(state).items()}}
+    meta = {
+        "names": list(problem.names),
+        "method": settings.method,
+        "f0": f0,
+        "quiet": quiet,
+        "converged": converged,
+        "history": history,
+    }
+    arrays = {
+        "u": np.asarray(u),
+        "meta": np.asarray(json.dumps(meta)),
+        **{f"state_{k}": v for k, v in _flatten(state).items()},
+    }
     tmp = out / "checkpoint.tmp.npz"
     np.savez(tmp, **arrays)
     tmp.replace(out / "checkpoint.npz")
-    _write_history(out / "history.csv", problem, history)
+    tmp = out / "history.tmp.csv"
+    _write_history(tmp, problem, history)
+    tmp.replace(out / "history.csv")
+
+
+_META_KEYS = {"names", "method", "f0", "quiet", "converged", "history"}
 
 
 def load_checkpoint(out: Path):
-    """(u, optimiser-state leaves, meta dict) from ``out/checkpoint.npz``."""
-    arrays = np.load(Path(out) / "checkpoint.npz")
-    meta = json.loads(str(arrays["meta"]))
-    leaves = {k[6:]: arrays[k] for k in arrays.files if k.startswith("state_")}
-    return jnp.asarray(arrays["u"]), leaves, meta
+    """(u, optimiser-state leaves, meta dict) from ``out/checkpoint.npz``.
+
+    Raises:
+        FileNotFoundError: there is no checkpoint.
+        CorruptFileError: the file is truncated, corrupted or lacks an entry a
+            resume needs; the message names the file.
+    """
+    path = Path(out) / "checkpoint.npz"
+    if not path.exists():
+        raise FileNotFoundError(f"no checkpoint at {path}")
+    try:
+        with np.load(path) as arrays:
+            meta = json.loads(str(arrays["meta"]))
+            leaves = {k[6:]: np.asarray(arrays[k]) for k in arrays.files if k.startswith("state_")}
+            u = np.asarray(arrays["u"])
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise CorruptFileError(
+            f"{path}: cannot be read ({type(err).__name__}: {err}); the run cannot be "
+            "resumed from it (move it away to start over)"
+        ) from None
+    missing = _META_KEYS - set(meta) if isinstance(meta, dict) else _META_KEYS
+    if missing or not isinstance(meta.get("history"), list) or len(meta["history"]) == 0:
+        raise CorruptFileError(
+            f"{path}: its metadata lacks {sorted(missing) or 'history'}; the checkpoint is corrupted"
+        )
+    if u.shape != (len(meta["names"]),) or not np.all(np.isfinite(u)):
+        raise CorruptFileError(f"{path}: the design u = {u} does not fit {meta['names']}; the checkpoint is corrupted")
+    return jnp.asarray(u), leaves, meta

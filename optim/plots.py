@@ -9,8 +9,13 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np  # noqa: E402
 
-UNIT = {"crank_length": ("L1", 1e3, "mm"), "rod_length": ("L2", 1e3, "mm"), "offset": ("e", 1e3, "mm"),
-        "clearance_B": ("c_B", 1e3, "mm"), "clearance_C": ("c_C", 1e3, "mm")}
+UNIT = {
+    "crank_length": ("L1", 1e3, "mm"),
+    "rod_length": ("L2", 1e3, "mm"),
+    "offset": ("e", 1e3, "mm"),
+    "clearance_B": ("c_B", 1e3, "mm"),
+    "clearance_C": ("c_C", 1e3, "mm"),
+}
 
 
 def label(name):
@@ -45,10 +50,20 @@ def plot_scans(csv_path: Path, report: dict, png: Path):
             xs = np.array(ax.get_xlim()) / k
             span = xs - x0
             ref = f0 if f0 is not None else np.nan
-            ax.plot(xs * k, ref + e["fine_slope"] * span, "k--", lw=1,
-                    label=f"LS slope over fine scan {e['fine_slope']:+.3g} deg/SI")
-            ax.plot(xs * k, ref + e["ensemble_gradient"] * span, "r-", lw=1,
-                    label=f"ensemble gradient {e['ensemble_gradient']:+.3g} deg/SI")
+            ax.plot(
+                xs * k,
+                ref + e["fine_slope"] * span,
+                "k--",
+                lw=1,
+                label=f"LS slope over fine scan {e['fine_slope']:+.3g} deg/SI",
+            )
+            ax.plot(
+                xs * k,
+                ref + e["ensemble_gradient"] * span,
+                "r-",
+                lw=1,
+                label=f"ensemble gradient {e['ensemble_gradient']:+.3g} deg/SI",
+            )
             ax.set_xlabel(label(name))
             ax.set_ylabel("RMS transmission-angle error [deg]")
             ax.legend(fontsize=7)
@@ -103,8 +118,9 @@ def plot_tornado(result: dict, path, title: str | None = None):
     """Tornado chart of :func:`optim.sensitivity.sensitivities`: per metric, the
     elasticities (% metric change per % parameter change), largest on top."""
     metrics = result["metrics"]
-    fig, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 0.35 * len(result["names"]) + 1.5),
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(metrics), figsize=(4.2 * len(metrics), 0.35 * len(result["names"]) + 1.5), squeeze=False
+    )
     for ax, m, el in zip(axes[0], metrics, result["elasticity"]):
         order = np.argsort(np.abs(el))
         ax.barh(np.arange(len(order)), el[order], color=np.where(el[order] >= 0, "C3", "C0"))

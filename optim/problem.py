@@ -12,7 +12,7 @@ algorithm, exact for one active constraint and convergent in general).
 from __future__ import annotations
 
 import dataclasses
-from typing import Sequence
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -20,7 +20,7 @@ import numpy as np
 import optax
 
 from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
-from jaxcrank.sweep import Tolerance, monte_carlo
+from jaxcrank.sampling import Tolerance, monte_carlo
 
 from .objective import Objective, value
 
@@ -43,7 +43,7 @@ class Problem:
             ``(name, tolerance, distribution)`` per parameter: the part's value is the
             design's (or the base's) value plus a deviation within ``+-tolerance`` (SI),
             ``"uniform"`` over the band or ``"normal"`` with the band as +-3 sigma
-            (:class:`jaxcrank.sweep.Tolerance`).
+            (:class:`jaxcrank.sampling.Tolerance`).
         samples: number of manufactured parts the robust objective averages over
             (0: the nominal design alone). With ``samples > 0`` the Eq. 19 part of the
             objective is the Monte Carlo mean over ``samples`` parts, the same draws at
@@ -78,7 +78,9 @@ class Problem:
                 raise ParameterError(f"bounds of {name!r}: lower = {lo:g} must be below upper = {hi:g}")
             get_parameter(self.base, name)  # raises on unknown names
         if len(self.A) != len(self.b) or any(len(row) != n for row in self.A):
-            raise ParameterError(f"constraints: A must be (m, {n}) and b (m,), got {len(self.A)} rows, {len(self.b)} bounds")
+            raise ParameterError(
+                f"constraints: A must be (m, {n}) and b (m,), got {len(self.A)} rows, {len(self.b)} bounds"
+            )
         if self.cost_weight < 0:
             raise ParameterError(f"cost_weight = {self.cost_weight:g} must be >= 0")
         if self.cost_weight > 0 and not any(nm.startswith("clearance_") for nm in self.names):
@@ -99,20 +101,26 @@ class Problem:
             get_parameter(self.base, name)  # raises on unknown names
             Tolerance(0.0, float(tol), dist)  # checks tolerance >= 0 and the distribution
             if name == "crank_speed":
-                raise ParameterError("scatter of crank_speed is not supported: the objective's sample grid "
-                                     "(equal crank angles) needs one crank speed for all parts")
+                raise ParameterError(
+                    "scatter of crank_speed is not supported: the objective's sample grid "
+                    "(equal crank angles) needs one crank speed for all parts"
+                )
         if len({e[0] for e in self.scatter}) != len(self.scatter):
             raise ParameterError("scatter names a parameter twice")
         if self.samples:
             dev = self.draws()
             for j, (name, tol, _) in enumerate(self.scatter):
                 if name.startswith("clearance_"):
-                    lowest = (self.lower[self.names.index(name)] if name in self.names
-                              else float(get_parameter(self.base, name)))
+                    lowest = (
+                        self.lower[self.names.index(name)]
+                        if name in self.names
+                        else float(get_parameter(self.base, name))
+                    )
                     if lowest + dev[:, j].min() <= 0.0:
                         raise ParameterError(
                             f"scatter of {name}: +-{tol:g} m reaches a clearance <= 0 ({lowest:g} m "
-                            f"{dev[:, j].min():+g} m in the draws); valid: tolerance below the smallest clearance")
+                            f"{dev[:, j].min():+g} m in the draws); valid: tolerance below the smallest clearance"
+                        )
 
     @property
     def description(self) -> str:
@@ -177,7 +185,7 @@ class Problem:
 
     def draws(self) -> np.ndarray:
         """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI:
-        the Monte Carlo draws of :func:`jaxcrank.sweep.monte_carlo` about a zero nominal."""
+        the Monte Carlo draws of :func:`jaxcrank.sampling.monte_carlo` about a zero nominal."""
         if not self.scatter:
             return np.zeros((self.samples, 0))
         tolerances = {name: Tolerance(0.0, tol, dist) for name, tol, dist in self.scatter}
@@ -214,36 +222,64 @@ def paper_problem(objective: Objective = Objective(), start: Sequence[float] | N
     mm) lies outside its stated box."""
     base = paper()
     e = float(base.offset)
-    return Problem(base=base, names=("crank_length", "rod_length"), lower=(0.110, 0.390), upper=(0.130, 0.410),
-                   A=((1.0, -1.0),), b=(-e,), start=(0.120, 0.400) if start is None else tuple(start),
-                   objective=objective, title="paper: RMS transmission-angle error over L1, L2")
+    return Problem(
+        base=base,
+        names=("crank_length", "rod_length"),
+        lower=(0.110, 0.390),
+        upper=(0.130, 0.410),
+        A=((1.0, -1.0),),
+        b=(-e,),
+        start=(0.120, 0.400) if start is None else tuple(start),
+        objective=objective,
+        title="paper: RMS transmission-angle error over L1, L2",
+    )
 
 
-def tolerance_problem(objective: Objective = Objective(), cost_weight: float = 0.005,
-                      start: Sequence[float] | None = None) -> Problem:
+def tolerance_problem(
+    objective: Objective = Objective(), cost_weight: float = 0.005, start: Sequence[float] | None = None
+) -> Problem:
     """Tolerance allocation: radial clearances c_B, c_C in [0.1, 0.5] mm at the
     paper's geometry, minimising RMS transmission-angle error + manufacturing cost
     (:meth:`Problem.cost`, reference clearance 0.5 mm). Start: 0.4 mm at both."""
-    return Problem(base=paper(), names=("clearance_B", "clearance_C"), lower=(1e-4, 1e-4), upper=(5e-4, 5e-4),
-                   start=(4e-4, 4e-4) if start is None else tuple(start), objective=objective,
-                   cost_weight=cost_weight, cost_reference=5e-4,
-                   title="tolerance allocation: RMS error + reciprocal clearance cost")
+    return Problem(
+        base=paper(),
+        names=("clearance_B", "clearance_C"),
+        lower=(1e-4, 1e-4),
+        upper=(5e-4, 5e-4),
+        start=(4e-4, 4e-4) if start is None else tuple(start),
+        objective=objective,
+        cost_weight=cost_weight,
+        cost_reference=5e-4,
+        title="tolerance allocation: RMS error + reciprocal clearance cost",
+    )
 
 
 #: the robust problem's default manufacturing scatter: lengths +-0.05 mm (normal, +-3 sigma),
 #: clearances +-0.05 mm (uniform) about the preset's 0.5 mm
-ROBUST_SCATTER = (("crank_length", 5e-5, "normal"), ("rod_length", 5e-5, "normal"),
-                  ("clearance_B", 5e-5, "uniform"), ("clearance_C", 5e-5, "uniform"))
+ROBUST_SCATTER = (
+    ("crank_length", 5e-5, "normal"),
+    ("rod_length", 5e-5, "normal"),
+    ("clearance_B", 5e-5, "uniform"),
+    ("clearance_C", 5e-5, "uniform"),
+)
 
 
-def robust_problem(objective: Objective = Objective(), samples: int = 8, seed: int = 0,
-                   start: Sequence[float] | None = None) -> Problem:
+def robust_problem(
+    objective: Objective = Objective(), samples: int = 8, seed: int = 0, start: Sequence[float] | None = None
+) -> Problem:
     """The paper's L1, L2 problem under manufacturing tolerances: minimise the
     expected RMS transmission-angle error over ``samples`` parts drawn from
     :data:`ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
     p = paper_problem(objective, start)
-    return dataclasses.replace(p, scatter=ROBUST_SCATTER, samples=samples, seed=seed,
-                               title="robust: expected RMS transmission-angle error")
+    return dataclasses.replace(
+        p, scatter=ROBUST_SCATTER, samples=samples, seed=seed, title="robust: expected RMS transmission-angle error"
+    )
 
 
-PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem, "robust": robust_problem}
+def _design(**kwargs):
+    from .design import design_problem  # optim.design builds on this module
+
+    return design_problem(**kwargs)
+
+
+PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem, "robust": robust_problem, "design": _design}

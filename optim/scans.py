@@ -65,12 +65,28 @@ def local_slopes(problem: Problem, x0, half_width: float, points: int, progress=
     return np.array([least_squares_slope(offsets, v) for v in values]), values
 
 
-def run(problem: Problem, out: Path, points=21, fine_points=41, half_width=2e-3, micro_step=2e-5,
-        pathwise_gradient=True, progress=True):
+def run(
+    problem: Problem,
+    out: Path,
+    points=21,
+    fine_points=41,
+    half_width=2e-3,
+    micro_step=2e-5,
+    pathwise_gradient=True,
+    progress=True,
+):
     out.mkdir(parents=True, exist_ok=True)
     x0 = np.asarray(problem.from_unit(problem.start_unit()))
-    rows, report = [], {"problem": problem.description, "start": x0.tolist(), "names": list(problem.names),
-                        "objective": dataclasses.asdict(problem.objective), "variables": {}}
+    rows, report = (
+        [],
+        {
+            "problem": problem.description,
+            "start": x0.tolist(),
+            "names": list(problem.names),
+            "objective": dataclasses.asdict(problem.objective),
+            "variables": {},
+        },
+    )
     tic = time.perf_counter()
     for i, name in enumerate(problem.names):
         lo, hi = problem.lower[i], problem.upper[i]
@@ -88,8 +104,9 @@ def run(problem: Problem, out: Path, points=21, fine_points=41, half_width=2e-3,
             if kind == "micro":
                 fd = np.diff(values) / micro_step
                 entry["micro_fd_slopes"] = [float(v) for v in fd]
-                entry["micro_relative_jitter"] = float(np.nanstd(values - np.polyval(
-                    np.polyfit(xs[:, i], values, 1), xs[:, i])) / np.nanmean(values))
+                entry["micro_relative_jitter"] = float(
+                    np.nanstd(values - np.polyval(np.polyfit(xs[:, i], values, 1), xs[:, i])) / np.nanmean(values)
+                )
         report["variables"][name] = entry
     report["scan_seconds"] = time.perf_counter() - tic
 
@@ -112,6 +129,7 @@ def run(problem: Problem, out: Path, points=21, fine_points=41, half_width=2e-3,
         w.writerows(rows)
     (out / "scans.json").write_text(json.dumps(report, indent=2))
     from .plots import plot_scans
+
     plot_scans(out / "scans.csv", report, out / "scans.png")
     return report
 
@@ -131,9 +149,11 @@ def main(argv=None):
     pts, fine = (7, 11) if args.quick else (args.points, args.fine_points)
     report = run(problem, args.out, pts, fine, args.half_width, pathwise_gradient=not args.no_pathwise)
     for name, e in report["variables"].items():
-        print(f"{name}: fine LS slope {e['fine_slope']:+.4g}, ensemble gradient {e['ensemble_gradient']:+.4g} "
-              f"(ratio {e['ensemble_over_fine_slope']:.3f}), coarse slope {e['coarse_slope']:+.4g}, "
-              f"micro FD slopes {min(e['micro_fd_slopes']):+.3g} .. {max(e['micro_fd_slopes']):+.3g} deg/SI")
+        print(
+            f"{name}: fine LS slope {e['fine_slope']:+.4g}, ensemble gradient {e['ensemble_gradient']:+.4g} "
+            f"(ratio {e['ensemble_over_fine_slope']:.3f}), coarse slope {e['coarse_slope']:+.4g}, "
+            f"micro FD slopes {min(e['micro_fd_slopes']):+.3g} .. {max(e['micro_fd_slopes']):+.3g} deg/SI"
+        )
     if "pathwise_gradient" in report:
         print("pathwise gradient:", report["pathwise_gradient"])
 

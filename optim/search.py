@@ -20,6 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
+from jaxcrank.params import ParameterError
+
 from .objective import pathwise_errors
 from .problem import Problem
 
@@ -63,11 +65,11 @@ def rms_errors(problem: Problem, xs, chunk: int = 16, progress: bool = True):
     values, oks = [], []
     with tqdm(total=len(xs), desc="designs", unit="design", disable=not progress) as bar:
         for i in range(0, len(xs), chunk):
-            block = xs[i:i + chunk]
+            block = xs[i : i + chunk]
             pad = chunk - len(block)  # one compiled shape per chunk size, also for a single design
             padded = np.concatenate([block, np.repeat(block[-1:], pad, axis=0)]) if pad else block
             v, ok = _batch(problem, jnp.asarray(padded))
-            v, ok = np.asarray(v)[:len(block)], np.asarray(ok)[:len(block)]
+            v, ok = np.asarray(v)[: len(block)], np.asarray(ok)[: len(block)]
             values.append(np.where(ok, v, np.nan))
             oks.append(ok)
             bar.update(len(block))
@@ -120,8 +122,15 @@ def grid_search(problem: Problem, n: int = 21, chunk: int = 21, progress: bool =
         errs[feasible], ok[feasible] = e, o
         values[feasible] = _with_cost(problem, pts[feasible], e, o)
     i = int(np.nanargmin(values))
-    return Grid(axes, values.reshape(n, n), errs.reshape(n, n), feasible.reshape(n, n), ok.reshape(n, n),
-                pts[i], float(values[i]))
+    return Grid(
+        axes,
+        values.reshape(n, n),
+        errs.reshape(n, n),
+        feasible.reshape(n, n),
+        ok.reshape(n, n),
+        pts[i],
+        float(values[i]),
+    )
 
 
 def write_grid(path, problem: Problem, grid: Grid):
@@ -131,12 +140,22 @@ def write_grid(path, problem: Problem, grid: Grid):
 
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow([f"{n}_SI" for n in problem.names] + ["rms_error_deg", "cost_deg", "objective_deg",
-                                                          "feasible", "ok"])
+        w.writerow(
+            [f"{n}_SI" for n in problem.names] + ["rms_error_deg", "cost_deg", "objective_deg", "feasible", "ok"]
+        )
         for (i, a), (j, b) in itertools.product(enumerate(grid.axes[0]), enumerate(grid.axes[1])):
             v, e = grid.values[i, j], grid.errors[i, j]
-            w.writerow([repr(float(a)), repr(float(b)), repr(float(e)), repr(float(v - e)), repr(float(v)),
-                        bool(grid.feasible[i, j]), bool(grid.ok[i, j])])
+            w.writerow(
+                [
+                    repr(float(a)),
+                    repr(float(b)),
+                    repr(float(e)),
+                    repr(float(v - e)),
+                    repr(float(v)),
+                    bool(grid.feasible[i, j]),
+                    bool(grid.ok[i, j]),
+                ]
+            )
 
 
 def read_grid(path, problem: Problem, n: int):
@@ -147,11 +166,20 @@ def read_grid(path, problem: Problem, n: int):
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     cols = [f"{nm}_SI" for nm in problem.names]
-    if len(rows) != n * n or any(c not in rows[0] for c in cols):
-        raise ValueError(f"{path} is not an {n} x {n} grid over {list(problem.names)}")
-    pts = np.array([[float(r[c]) for c in cols] for r in rows])
+    if len(rows) != n * n or any(c not in rows[0] for c in cols + ["rms_error_deg"]):
+        raise ParameterError(
+            f"--grid-from {path} is not a grid.csv of an {n} x {n} grid over "
+            f"{list(problem.names)}: give the grid.csv of a run with the same variables and --grid {n}"
+        )
+    try:
+        pts = np.array([[float(r[c]) for c in cols] for r in rows])
+        errors = np.array([float(r["rms_error_deg"]) if r["rms_error_deg"] != "" else np.nan for r in rows])
+    except (TypeError, ValueError):
+        raise ParameterError(f"--grid-from {path}: a cell is not a number (a damaged grid.csv?)") from None
     expect = np.array(list(itertools.product(*grid_axes(problem, n))))
     if not np.allclose(pts, expect, rtol=1e-12, atol=0.0):
-        raise ValueError(f"{path}: its grid points are not the {n} x {n} grid over this problem's box")
-    return np.array([float(r["rms_error_deg"]) for r in rows]).reshape(n, n)
-
+        raise ParameterError(
+            f"--grid-from {path}: its grid points are not the {n} x {n} grid over this "
+            "problem's box: give the grid.csv of a run with the same box and --grid"
+        )
+    return errors.reshape(n, n)

@@ -24,50 +24,61 @@ local derivative (use a sweep over a band, :mod:`jaxcrank.sweep`, for those).
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxcrank import model
-from jaxcrank.outputs import transmission_angle_deviation
+from jaxcrank import metrics, model
 from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
+from jaxcrank.solve import simulate
 
-from .objective import Objective, _eval_samples, solve_window, window_starts
+from .objective import Objective, solve_window, window_starts
 
-#: metrics whose gradient the ensemble estimate follows (name -> meaning); units in the suffix
-METRICS = {
-    "rms_transmission_angle_error_deg": "RMS of actual - ideal transmission angle (paper Eq. 19)",
-    "rms_rod_x_deviation_m": "RMS of rod-centre x - ideal",
-    "rms_slider_x_deviation_m": "RMS of slider x - ideal",
-    "rms_driving_moment_deviation_N_m": "RMS of driving moment - ideal driving moment",
-}
+#: metrics whose gradient the ensemble estimate follows: the RMS metrics of
+#: :mod:`jaxcrank.metrics` (units in the suffix)
+METRICS = metrics.RMS_METRICS
 
 #: default parameters: the physical design and operating parameters (not the smoothing widths)
-PARAMETERS = ("crank_length", "rod_length", "offset", "rod_mass", "slider_mass", "rod_inertia", "crank_speed",
-              "clearance_B", "clearance_C", "contact.restitution", "friction.coefficient",
-              "rod_material.youngs_modulus")
+PARAMETERS = (
+    "crank_length",
+    "rod_length",
+    "offset",
+    "rod_mass",
+    "slider_mass",
+    "rod_inertia",
+    "crank_speed",
+    "clearance_B",
+    "clearance_C",
+    "contact.restitution",
+    "friction.coefficient",
+    "rod_material.youngs_modulus",
+)
 
 
 def deviations(mech: Mechanism, ts, ys):
-    """Per-sample deviations from the ideal mechanism, shape (n, 4), in the order
-    and units of :data:`METRICS` (deg, m, m, N m)."""
-    def one(t, y):
-        f = model.evaluate(mech, t, y)
-        return jnp.stack([transmission_angle_deviation(f.q[2], f.ideal_q[2]), f.q[0] - f.ideal_q[0],
-                          f.q[3] - f.ideal_q[3], f.driving_moment - f.ideal_driving_moment])
-
-    return jax.vmap(one)(ts, ys)
+    """Per-sample deviations from the ideal mechanism behind :data:`METRICS`, shape
+    (n, 4), in that order and in their units (deg, m, m, N m)."""
+    return jax.vmap(lambda t, y: metrics.rms_signals(model.evaluate(mech, t, y)))(ts, ys)
 
 
-def window_sums(base: Mechanism, names, x, starts, i, n_window: int, dt: float, obj: Objective):
+def metric_values(sim):
+    """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
+    :mod:`jaxcrank.tracking`), shape (4,), in their units."""
+    return jnp.stack([sim.metrics[k] for k in METRICS])
+
+
+def window_sums(base: Mechanism, names, x, starts, i, n_window: int, dt: float, obj: Objective, metrics=deviations):
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
     carried-over start state: the sums of squared deviations over its samples,
-    shape (4,), in the units of :data:`METRICS` squared, and whether it finished."""
+    shape (4,), in the units of :data:`METRICS` squared, and whether it finished.
+
+    ``metrics``: the per-sample quantities ``(mech, ts, ys) -> (n, M)`` whose squares
+    are summed (default :func:`deviations`; :mod:`optim.design` adds contact forces)."""
     m = set_parameters(base, names, x)
     ts, ys, ok = solve_window(m, starts, i, n_window, dt, obj)
-    return jnp.sum(deviations(m, ts, ys) ** 2, axis=0), ok
+    return jnp.sum(metrics(m, ts, ys) ** 2, axis=0), ok
 
 
 def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objective = Objective()) -> dict:
@@ -82,16 +93,16 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     units = [parameter_unit(n) for n in names]
     grid = obj.grid(mech)  # concrete sample grid of the design (crank speed may be a variable below)
     n_start, _, n_window, dt = grid
-    sim, n_start, _ = _eval_samples(mech, obj, True, grid)
-    late = slice(n_start + 1, None)
-    dev = deviations(mech, sim.ts[late], sim.ys[late])
-    value = jnp.sqrt(jnp.mean(dev**2, axis=0))
+    n_start, n_eval, _, dt = grid
+    ts = dt * jnp.arange(n_start + n_eval + 1)
+    # the metrics over the samples after t_start (index > n_start), tracked during the solve
+    sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, metrics_start=ts[n_start])
+    value = metric_values(sim)
     starts = window_starts(sim, n_start, grid, obj)
     x0 = jnp.array([get_parameter(mech, n) for n in names])
 
     def jac(i):
-        sums, vjp, ok = jax.vjp(lambda x: window_sums(mech, names, x, starts, i, n_window, dt, obj), x0,
-                                has_aux=True)
+        sums, vjp, ok = jax.vjp(lambda x: window_sums(mech, names, x, starts, i, n_window, dt, obj), x0, has_aux=True)
         (rows,) = jax.vmap(vjp)(jnp.eye(sums.shape[0]))
         return sums, rows, ok
 
@@ -99,16 +110,28 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     sums, rows, ok = np.asarray(sums), np.asarray(rows), np.asarray(ok)
     n_ok = int(ok.sum())
     if n_ok < 0.5 * len(ok):
-        raise RuntimeError(f"{len(ok) - n_ok} of {len(ok)} ensemble windows failed; raise "
-                           "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window")
+        raise RuntimeError(
+            f"{len(ok) - n_ok} of {len(ok)} ensemble windows failed; raise "
+            "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window"
+        )
     w = ok.astype(float)
     estimate = np.sqrt(np.einsum("k,kc->c", w, sums) / (n_window * n_ok))
     grad_sq = np.einsum("k,kcp->cp", w, rows) / (n_window * n_ok)
     gradient = grad_sq / (2.0 * estimate[:, None])
     value = np.asarray(value)
     x = np.asarray(x0)
-    return {"names": names, "units": units, "x": x, "metrics": list(METRICS), "value": value,
-            "gradient": gradient, "elasticity": gradient * x[None, :] / value[:, None],
-            "windows": int(len(ok)), "windows_ok": n_ok,
-            "window_s": float(n_window * dt), "evaluation_window_s": (obj.t_start, obj.t_end),
-            "starts": starts, "grid": grid}
+    return {
+        "names": names,
+        "units": units,
+        "x": x,
+        "metrics": list(METRICS),
+        "value": value,
+        "gradient": gradient,
+        "elasticity": gradient * x[None, :] / value[:, None],
+        "windows": int(len(ok)),
+        "windows_ok": n_ok,
+        "window_s": float(n_window * dt),
+        "evaluation_window_s": (obj.t_start, obj.t_end),
+        "starts": starts,
+        "grid": grid,
+    }

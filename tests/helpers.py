@@ -8,5 +8,6 @@ def frictionless(mech):
 
 
 def with_law(mech, law, restitution=None):
+    """``mech`` with the contact law named ``law`` (a key of ``jc.laws.CONTACT_LAWS``)."""
     ce = mech.contact.restitution if restitution is None else restitution
-    return eqx.tree_at(lambda m: m.contact, mech, jc.Contact(law=law, restitution=ce))
+    return eqx.tree_at(lambda m: m.contact, mech, jc.Contact(law=jc.laws.CONTACT_LAWS[law](), restitution=ce))

@@ -21,14 +21,16 @@ PARAMS = ["crank_length", "rod_length", "clearance_B", "clearance_C"]
 def _mechanism(p):
     base = jc.paper()
     l1, l2, cb, cc = p
-    return eqx.tree_at(lambda m: (m.crank_length, m.rod_length, m.joint_B.pin_radius, m.joint_C.pin_radius),
-                       base, (l1, l2, base.joint_B.hole_radius - cb, base.joint_C.hole_radius - cc))
+    return eqx.tree_at(
+        lambda m: (m.crank_length, m.rod_length, m.joint_B.pin_radius, m.joint_C.pin_radius),
+        base,
+        (l1, l2, base.joint_B.hole_radius - cb, base.joint_C.hole_radius - cc),
+    )
 
 
 def rms_slider_deviation_mm(p, t1=WINDOW, adjoint=None):
     mech = _mechanism(p)
-    sim = jc.simulate(mech, ts=jnp.linspace(0.0, t1, 51), rtol=1e-10, atol=1e-10, max_steps=100_000,
-                      adjoint=adjoint)
+    sim = jc.simulate(mech, ts=jnp.linspace(0.0, t1, 51), rtol=1e-10, atol=1e-10, max_steps=100_000, adjoint=adjoint)
     q = jax.vmap(lambda t, y: model.evaluate(mech, t, y).q)(sim.ts, sim.ys)
     qi = jax.vmap(lambda t: ideal.positions(mech, t))(sim.ts)
     rod = q[:, :2] - qi[:, :2]

@@ -40,7 +40,9 @@ def test_ideal_driving_moment_balances_power(paper):
         q, qd, _ = ideal.kinematics(paper, t)
         kin = 0.5 * jnp.sum(ideal.mass_matrix(paper) * qd**2)
         th1 = ideal.crank_angle(paper, t)
-        pot = paper.rod_mass * paper.gravity * q[1] + paper.crank_mass * paper.gravity * 0.5 * paper.crank_length * jnp.sin(th1)
+        pot = paper.rod_mass * paper.gravity * q[
+            1
+        ] + paper.crank_mass * paper.gravity * 0.5 * paper.crank_length * jnp.sin(th1)
         return kin + pot
 
     for t in np.linspace(0.001, 0.099, 9):

@@ -1,6 +1,5 @@
 """The notebooks run top to bottom (on short settings)."""
 
-import os
 from pathlib import Path
 
 import nbformat

@@ -9,11 +9,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxcrank import paper
 from optim import objective as O
 from optim import search
 from optim.optimize import Settings, optimize
 from optim.problem import Problem, paper_problem, robust_problem, tolerance_problem
-from jaxcrank import paper
 
 # Short ensemble objective: evaluation window (0.02, 0.03] s (impacts from the first
 # milliseconds on, chaotic by 20 ms), five 2 ms windows. The default suite solves the
@@ -69,6 +69,7 @@ def test_start_state_round_trip_and_carry_over():
     _, starts = O.reference(mech, SHORT)
     y = O.start_state(mech, starts, 2)
     from jaxcrank import model
+
     d, dd = model.eccentricities(mech, starts.t[2], y)
     np.testing.assert_allclose(d, starts.eccentricity[2], rtol=0, atol=1e-15)
     np.testing.assert_allclose(dd, starts.eccentricity_rate[2], rtol=0, atol=1e-12)
@@ -82,7 +83,7 @@ def test_start_state_round_trip_and_carry_over():
     # the approach-speed memories (m/s) and works (J) keep their physical values: the
     # state scales change with the clearances (a scaled carry-over made the clearance
     # gradient miss the memories' dependence, a 0.7-30 % error against central differences)
-    rest = np.asarray(O.start_state(other, starts, 2)[8:] * model.state_scales(other)[8:])
+    rest = np.asarray(model.auxiliary(other, O.start_state(other, starts, 2)))
     np.testing.assert_allclose(rest, starts.rest[2], rtol=1e-15)
 
 
@@ -106,7 +107,8 @@ def test_ensemble_gradient_is_the_derivative_of_the_windows_with_starts_fixed():
     """The estimator's AD (start-state carry-over, per-window gradients, assembly)
     against central differences of the same function, starts held fixed."""
     _estimator_matches_central_differences(
-        O.Objective(t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-9, atol=1e-9, window_solver="tsit5"))
+        O.Objective(t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-9, atol=1e-9, window_solver="tsit5")
+    )
 
 
 def test_a_window_over_its_step_budget_is_left_out_not_nan():
@@ -136,7 +138,8 @@ def test_ensemble_gradient_with_the_default_implicit_solver_matches_central_diff
     # kvaerno5 needs ~75 000 steps (accepted + rejected) for the second window at
     # rtol 1e-8, where rodas4 needs ~500 and tsit5 ~370
     _estimator_matches_central_differences(
-        O.Objective(t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-8, atol=1e-8, window_max_steps=150_000))
+        O.Objective(t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-8, atol=1e-8, window_max_steps=150_000)
+    )
 
 
 @pytest.mark.slow
@@ -144,8 +147,16 @@ def test_ensemble_gradient_with_rodas4_matches_central_differences():
     # was a strict expected failure (3.9e-4) while XLA contracted to FMA: the checkpointed
     # adjoint's recomputed steps rounded differently from the forward solve (jaxcrank.runtime)
     _estimator_matches_central_differences(
-        O.Objective(t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-8, atol=1e-8, window_max_steps=50_000,
-                    window_solver="rodas4"))
+        O.Objective(
+            t_start=0.02,
+            t_end=0.022,
+            window=1e-3,
+            rtol=1e-8,
+            atol=1e-8,
+            window_max_steps=50_000,
+            window_solver="rodas4",
+        )
+    )
 
 
 def test_ensemble_gradient_is_finite_and_pathwise_is_not(short_run):
@@ -157,9 +168,14 @@ def test_ensemble_gradient_is_finite_and_pathwise_is_not(short_run):
     assert np.abs(gp).max() > 100 * np.abs(g).max()
 
 
-@pytest.mark.parametrize("u, expect", [
-    ((0.5, 0.5), (0.5, 0.5)), ((1.5, -0.3), (1.0, 0.0)), ((-1.0, 2.0), (0.0, 1.0)),
-])
+@pytest.mark.parametrize(
+    "u, expect",
+    [
+        ((0.5, 0.5), (0.5, 0.5)),
+        ((1.5, -0.3), (1.0, 0.0)),
+        ((-1.0, 2.0), (0.0, 1.0)),
+    ],
+)
 def test_projection_onto_the_box(u, expect):
     np.testing.assert_allclose(paper_problem().project(jnp.array(u)), expect, atol=1e-12)
 
@@ -173,22 +189,52 @@ def test_projection_with_an_active_linear_constraint():
     assert prob.feasible(x, tol=1e-9)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(names=("bogus",), lower=(0.0,), upper=(1.0,)), "unknown design variable"),
-    (dict(names=("rod_length",), lower=(0.41,), upper=(0.39,)), "lower"),
-    (dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), cost_weight=1.0), "clearance"),
-    (dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), samples=2), "needs a scatter"),
-    (dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), samples=2,
-          scatter=(("crank_speed", 1.0, "uniform"),)), "crank_speed"),
-    (dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), samples=2,
-          scatter=(("rod_length", 1e-4, "triangular"),)), "distribution"),
-    (dict(names=("clearance_C",), lower=(1e-4,), upper=(5e-4,), samples=4,
-          scatter=(("clearance_C", 2e-4, "uniform"),)), "clearance <= 0"),
-    (dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), samples=2,
-          scatter=(("bogus", 1e-4, "normal"),)), "unknown design variable"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(names=("bogus",), lower=(0.0,), upper=(1.0,)), "unknown design variable"),
+        (dict(names=("rod_length",), lower=(0.41,), upper=(0.39,)), "lower"),
+        (dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), cost_weight=1.0), "clearance"),
+        (dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), samples=2), "needs a scatter"),
+        (
+            dict(
+                names=("rod_length",),
+                lower=(0.39,),
+                upper=(0.41,),
+                samples=2,
+                scatter=(("crank_speed", 1.0, "uniform"),),
+            ),
+            "crank_speed",
+        ),
+        (
+            dict(
+                names=("rod_length",),
+                lower=(0.39,),
+                upper=(0.41,),
+                samples=2,
+                scatter=(("rod_length", 1e-4, "triangular"),),
+            ),
+            "distribution",
+        ),
+        (
+            dict(
+                names=("clearance_C",),
+                lower=(1e-4,),
+                upper=(5e-4,),
+                samples=4,
+                scatter=(("clearance_C", 2e-4, "uniform"),),
+            ),
+            "clearance <= 0",
+        ),
+        (
+            dict(names=("rod_length",), lower=(0.39,), upper=(0.41,), samples=2, scatter=(("bogus", 1e-4, "normal"),)),
+            "unknown design variable",
+        ),
+    ],
+)
 def test_bad_problems_raise(kwargs, match):
     from jaxcrank import ParameterError
+
     with pytest.raises(ParameterError, match=match):
         Problem(base=paper(), **kwargs)
 
@@ -215,8 +261,17 @@ def test_robust_objective_is_the_parts_mean_with_a_verified_gradient():
 
 def test_robust_problem_config_round_trip():
     from optim.cli import build, resolved
-    problem, settings = build({"problem": "robust", "design": {
-        "samples": 2, "seed": 7, "scatter": [["rod_length", 1e-4, "normal"], ["clearance_B", 5e-5, "uniform"]]}})
+
+    problem, settings = build(
+        {
+            "problem": "robust",
+            "design": {
+                "samples": 2,
+                "seed": 7,
+                "scatter": [["rod_length", 1e-4, "normal"], ["clearance_B", 5e-5, "uniform"]],
+            },
+        }
+    )
     assert problem.samples == 2 and problem.scatter[0] == ("rod_length", 1e-4, "normal")
     assert "over 2 manufactured parts" in problem.description
     again, _ = build(resolved(problem, settings, "robust"))
@@ -278,6 +333,7 @@ def test_grid_reports_failed_designs_without_nan_in_ok_rows():
 def test_ensemble_gradient_follows_the_least_squares_slope(design):
     """Issue 3: sign and 25 % agreement with the LS slope over +-2 mm (21 points)."""
     from optim.scans import gradient, local_slopes
+
     prob = paper_problem()
     slopes, _ = local_slopes(prob, np.array(design), 2e-3, 21)
     g = gradient(prob, np.array(design), "ensemble")
@@ -290,9 +346,12 @@ def test_optimize_cli_writes_history_figures_and_result(tmp_path):
     import json
 
     from jaxcrank.cli import main
+
     cfg = tmp_path / "opt.toml"
-    cfg.write_text('problem = "paper"\n[optimizer]\nmethod = "adam"\nmax_iterations = 2\n'
-                   '[objective]\nt_start = 0.0\nt_end = 0.002\nmethod = "pathwise"\n')
+    cfg.write_text(
+        'problem = "paper"\n[optimizer]\nmethod = "adam"\nmax_iterations = 2\n'
+        '[objective]\nt_start = 0.0\nt_end = 0.002\nmethod = "pathwise"\n'
+    )
     out = tmp_path / "run"
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--grid", "3", "--quiet"]) == 0
     for name in ("history.csv", "history.png", "landscape.png", "grid.csv", "result.json", "optimize.toml"):

@@ -19,10 +19,20 @@ def _forced_pendulum(t, y, args):
 
 
 def _solve(vf, solver, t1, y0, ts, dt0=None, tol=None, max_steps=100_000):
-    controller = (diffrax.ConstantStepSize() if tol is None
-                  else diffrax.PIDController(rtol=tol, atol=tol, norm=optx.rms_norm))
-    sol = diffrax.diffeqsolve(diffrax.ODETerm(vf), solver, 0.0, t1, dt0 if dt0 else 1e-3, jnp.asarray(y0),
-                              stepsize_controller=controller, saveat=diffrax.SaveAt(ts=ts), max_steps=max_steps)
+    controller = (
+        diffrax.ConstantStepSize() if tol is None else diffrax.PIDController(rtol=tol, atol=tol, norm=optx.rms_norm)
+    )
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vf),
+        solver,
+        0.0,
+        t1,
+        dt0 if dt0 else 1e-3,
+        jnp.asarray(y0),
+        stepsize_controller=controller,
+        saveat=diffrax.SaveAt(ts=ts),
+        max_steps=max_steps,
+    )
     return np.asarray(sol.ys), sol
 
 
@@ -65,8 +75,10 @@ def test_agrees_with_tsit5_on_the_paper_mechanism(paper):
     """First 5 ms of the paper run (the start-up impacts at both pins): Rodas4 and
     tsit5 at rtol = atol = 1e-8 give the same slider and rod motion to within
     1e-9 m (2e-6 of the 0.5 mm clearance)."""
-    cols = [outputs.trajectory(jc.simulate(paper, 0.005, n_samples=181, solver=s, rtol=1e-8, atol=1e-8))
-            for s in ("rodas4", "tsit5")]
+    cols = [
+        outputs.trajectory(jc.simulate(paper, 0.005, n_samples=181, solver=s, rtol=1e-8, atol=1e-8))
+        for s in ("rodas4", "tsit5")
+    ]
     for name in ("slider_x", "rod_x"):
         assert np.abs(cols[0][name] - cols[1][name]).max() < 1e-9, name
 
@@ -83,9 +95,18 @@ def test_reverse_mode_is_the_derivative_of_the_fixed_step_solution(paper):
 
     def objective(x):
         mech = eqx.tree_at(lambda m: (m.crank_length, m.rod_length), paper, (x[0], x[1]))
-        sol = diffrax.diffeqsolve(diffrax.ODETerm(model.vector_field), Rodas4(), 0.0, t1, 2e-7,
-                                  model.initial_state(mech), args=mech, saveat=diffrax.SaveAt(ts=ts),
-                                  stepsize_controller=diffrax.ConstantStepSize(), max_steps=10_000)
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(model.vector_field),
+            Rodas4(),
+            0.0,
+            t1,
+            2e-7,
+            model.initial_state(mech),
+            args=mech,
+            saveat=diffrax.SaveAt(ts=ts),
+            stepsize_controller=diffrax.ConstantStepSize(),
+            max_steps=10_000,
+        )
         return jnp.sum(outputs.transmission_angle_error(mech, sol.ts, sol.ys) ** 2)
 
     x = jnp.array([0.12, 0.40])

@@ -20,13 +20,19 @@ ISA = "--xla_cpu_max_isa=AVX"
     "flags, expected",
     [
         ("", f"{ISA} --xla_backend_extra_options={ENTRY}"),
-        ("--xla_force_host_platform_device_count=4",
-         f"--xla_force_host_platform_device_count=4 {ISA} --xla_backend_extra_options={ENTRY}"),
-        ("--xla_backend_extra_options=foo=1 --xla_dump_to=/tmp/x",
-         f"--xla_backend_extra_options=foo=1,{ENTRY} --xla_dump_to=/tmp/x {ISA}"),
+        (
+            "--xla_force_host_platform_device_count=4",
+            f"--xla_force_host_platform_device_count=4 {ISA} --xla_backend_extra_options={ENTRY}",
+        ),
+        (
+            "--xla_backend_extra_options=foo=1 --xla_dump_to=/tmp/x",
+            f"--xla_backend_extra_options=foo=1,{ENTRY} --xla_dump_to=/tmp/x {ISA}",
+        ),
         ("--xla_backend_extra_options=", f"--xla_backend_extra_options={ENTRY} {ISA}"),
-        (f"--xla_backend_extra_options={runtime.OPTION}=65536",
-         f"--xla_backend_extra_options={runtime.OPTION}=65536 {ISA}"),
+        (
+            f"--xla_backend_extra_options={runtime.OPTION}=65536",
+            f"--xla_backend_extra_options={runtime.OPTION}=65536 {ISA}",
+        ),
         ("--xla_cpu_max_isa=AVX512", f"--xla_cpu_max_isa=AVX512 --xla_backend_extra_options={ENTRY}"),
     ],
 )
@@ -78,7 +84,7 @@ def test_solver_loop_is_one_kernel_in_this_process(solver):
     flags = os.environ.get("XLA_FLAGS", "")
     assert runtime.OPTION in flags and "--xla_cpu_max_isa" in flags, runtime.status
     text = _compiled_solve_text(solver)
-    entry = text[text.index("ENTRY"):]
+    entry = text[text.index("ENTRY") :]
     assert 'xla_cpu_small_call="true"' in text
     assert " while(" not in entry  # diffrax's loop became one kernel
 
@@ -101,7 +107,6 @@ def test_fresh_process(opt_out, expected):
     env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", runtime.OPT_OUT)}
     env.update(JAX_PLATFORMS="cpu", **{runtime.OPT_OUT: opt_out})
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    out = subprocess.run([sys.executable, "-c", _CHILD], env=env, cwd=root, capture_output=True, text=True,
-                         timeout=300)
+    out = subprocess.run([sys.executable, "-c", _CHILD], env=env, cwd=root, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == expected

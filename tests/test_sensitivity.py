@@ -3,18 +3,27 @@ derivative of its windowed function (central differences, lengths and clearances
 and is finite with elasticities of the right
 dimension. Short windows, an explicit solver at tight tolerance (fast to compile)."""
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import jax
-import jax.numpy as jnp
 import jaxcrank as jc
 from optim import plots, sensitivity
 from optim.objective import Objective
 
 NAMES = ("rod_length", "clearance_C")
-OBJ = Objective(t_start=0.002, t_end=0.004, window=1e-3, windows=2, window_solver="tsit5", rtol=1e-9,
-                atol=1e-9, window_max_steps=20_000, samples_per_degree=2)
+OBJ = Objective(
+    t_start=0.002,
+    t_end=0.004,
+    window=1e-3,
+    windows=2,
+    window_solver="tsit5",
+    rtol=1e-9,
+    atol=1e-9,
+    window_max_steps=20_000,
+    samples_per_degree=2,
+)
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +47,9 @@ def windowed(result):
     windows' summed squares at the paper design, solves at rtol 1e-9."""
     mech, starts, (_, _, n_window, dt) = jc.paper(), result["starts"], result["grid"]
     x0 = jnp.asarray(result["x"])
-    total = jax.jit(lambda x: sum(sensitivity.window_sums(mech, NAMES, x, starts, i, n_window, dt, OBJ)[0]
-                                  for i in range(2)))
+    total = jax.jit(
+        lambda x: sum(sensitivity.window_sums(mech, NAMES, x, starts, i, n_window, dt, OBJ)[0] for i in range(2))
+    )
     jac = np.asarray(jax.jacrev(total)(x0))
 
     def central(j, h):

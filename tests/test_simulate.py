@@ -45,7 +45,11 @@ def test_exact_kinematic_closure(paper_rev2):
     """Slider deviation = -d_Bx + d_Cx + L2 (cos theta2 - cos theta2_ideal), exactly."""
     c, m = paper_rev2, jc.paper()
     lhs = _dev(c, "slider_x")
-    rhs = -c["ecc_B_x"] + c["ecc_C_x"] + m.rod_length * (np.cos(np.radians(c["rod_angle"])) - np.cos(np.radians(c["ideal_rod_angle"])))
+    rhs = (
+        -c["ecc_B_x"]
+        + c["ecc_C_x"]
+        + m.rod_length * (np.cos(np.radians(c["rod_angle"])) - np.cos(np.radians(c["ideal_rod_angle"])))
+    )
     np.testing.assert_allclose(lhs, rhs, atol=1e-12)
 
 
@@ -91,7 +95,9 @@ def test_ideal_joint_layouts(ideal_joints):
     mech = jc.paper()
     for j in ideal_joints:
         joint = getattr(mech, f"joint_{j}")
-        mech = eqx.tree_at(lambda m: getattr(m, f"joint_{j}"), mech, jc.Joint(joint.hole_radius, joint.pin_radius, ideal=True))
+        mech = eqx.tree_at(
+            lambda m, j=j: getattr(m, f"joint_{j}"), mech, jc.Joint(joint.hole_radius, joint.pin_radius, ideal=True)
+        )
     cols = outputs.trajectory(jc.simulate(mech, 0.02, n_samples=201))
     for j in ideal_joints:
         assert np.all(cols[f"ecc_{j}_x"] == 0.0)

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 import jaxcrank as jc
-from jaxcrank import cli, outputs, sweep
+from jaxcrank import cli, metrics, outputs, sampling, sweep
+from jaxcrank import spec as sweep_spec
 from jaxcrank.params import ParameterError
 
 ROOT = Path(__file__).resolve().parents[1]
-SHORT = sweep.Settings(revolutions=0.03, samples_per_revolution=1200, metrics_from_revolution=0.01,
-                       max_steps=20_000)
+SHORT = sweep.Settings(revolutions=0.03, samples_per_revolution=1200, metrics_from_revolution=0.01, max_steps=20_000)
 NAMES = ["clearance_C", "contact.memory_time"]
 # design 1: a 0.1 ns impact memory makes the solve too stiff for its step budget;
 # design 3: a clearance larger than the hole (invalid, caught before any solve)
@@ -40,10 +40,12 @@ def test_vmap_equals_python_loop_before_impacts():
         for n, v in zip(NAMES, DESIGNS[i]):
             mech = jc.params.set_parameter(mech, n, float(v))
         period = float(mech.period)
-        sim = jc.simulate(mech, ts=np.linspace(0.0, first_ms.revolutions, first_ms.n_samples) * period)
-        ref = outputs.metrics(outputs.trajectory(sim), mech, t_start=0.0)
+        sim = jc.simulate(
+            mech, ts=np.linspace(0.0, first_ms.revolutions, first_ms.n_samples) * period, metrics_start=0.0
+        )
+        ref = outputs.summary_metrics(sim)
         assert ref["peak_contact_force_C_N"] == 0.0 and ref["peak_contact_force_B_N"] == 0.0
-        for key in set(ref) & set(sweep.METRICS):
+        for key in set(ref) & set(metrics.METRICS):
             np.testing.assert_allclose(tab[key][row], ref[key], rtol=1e-9, atol=1e-300, err_msg=key)
         assert tab["steps"][row] == int(sim.num_steps)
 
@@ -54,9 +56,9 @@ def test_vmap_equals_python_loop_through_impacts(table):
     uses the same compiled batch shape: an unbatched compile rounds differently in
     the last bit, and impact chaos amplifies that to 1e-5..1e-3 relative in 3 ms.)"""
     for i in range(len(DESIGNS)):
-        one = sweep.run(jc.paper(), NAMES, DESIGNS[i:i + 1], SHORT, chunk=2, progress=False)
+        one = sweep.run(jc.paper(), NAMES, DESIGNS[i : i + 1], SHORT, chunk=2, progress=False)
         assert one["status"][0] == table["status"][i]
-        for k in list(sweep.METRICS) + ["steps"]:
+        for k in list(metrics.METRICS) + ["steps"]:
             np.testing.assert_array_equal(one[k][0], table[k][i], err_msg=k)
 
 
@@ -66,7 +68,7 @@ def test_batch_size_does_not_change_a_design(table):
     rounded differently per lane and per batch size)."""
     three = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=3, progress=False)
     assert list(three["status"]) == list(table["status"])
-    for k in list(sweep.METRICS) + ["steps"]:
+    for k in list(metrics.METRICS) + ["steps"]:
         np.testing.assert_array_equal(three[k], table[k], err_msg=k)
 
 
@@ -76,7 +78,7 @@ def test_workers_give_the_single_process_table():
     alone = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, progress=False)
     pooled = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, workers=2, progress=False)
     assert list(alone["status"]) == list(pooled["status"]) == ["ok", "max_steps", "ok", "invalid", "ok"]
-    for k in ["index", "steps"] + list(sweep.METRICS):
+    for k in ["index", "steps"] + list(metrics.METRICS):
         np.testing.assert_array_equal(pooled[k], alone[k], err_msg=k)
     assert list(pooled["message"]) == list(alone["message"])
 
@@ -92,7 +94,7 @@ def test_failures_are_reported_and_the_rest_completes(table):
     assert "max_steps" in table["message"][1] and "clearance_C = 0.009" in table["message"][3]
     assert "pin_radius" in table["message"][3] and "valid range" in table["message"][3]
     ok = table["status"] == "ok"
-    for k in sweep.METRICS:
+    for k in metrics.METRICS:
         assert np.all(np.isfinite(table[k][ok])) and np.all(np.isnan(table[k][~ok]))  # empty cells, not values
     # geometric bound of the zero-clearance reading: slider deviation stays within a few clearances
     assert np.all(table["max_abs_slider_x_deviation_m"][ok] < 0.01)
@@ -120,32 +122,38 @@ def test_killed_sweep_resumes_to_the_same_table(tmp_path, table, monkeypatch):
     monkeypatch.setattr(sweep, "_evaluate", real)
     resumed = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, resume=True, progress=False)
     assert list(resumed["status"]) == list(table["status"])
-    for k in list(sweep.METRICS) + ["steps"]:
+    for k in list(metrics.METRICS) + ["steps"]:
         np.testing.assert_array_equal(resumed[k], table[k], err_msg=k)
 
 
 _SUBPROCESS = """
 import json, sys, numpy as np, jax
 import jaxcrank as jc
-from jaxcrank import sweep
+from jaxcrank import metrics, sweep
 sys.path.insert(0, {tests!r})
 from test_sweep import NAMES, DESIGNS, SHORT
 tab = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=8, progress=False)  # 2 per device
 print(json.dumps({{"devices": jax.device_count(), "status": list(tab["status"]),
-                  **{{k: [None if np.isnan(v) else v for v in tab[k]] for k in sweep.METRICS}}}}))
+                  **{{k: [None if np.isnan(v) else v for v in tab[k]] for k in metrics.METRICS}}}}))
 """
 
 
 def test_sharded_over_four_host_devices_equals_one_device(table):
     env = dict(os.environ, JAX_NUM_CPU_DEVICES="4", JAX_PLATFORMS="cpu")
-    res = subprocess.run([sys.executable, "-c", _SUBPROCESS.format(tests=str(ROOT / "tests"))], env=env,
-                         capture_output=True, text=True, timeout=600, cwd=ROOT)
+    res = subprocess.run(
+        [sys.executable, "-c", _SUBPROCESS.format(tests=str(ROOT / "tests"))],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
     assert res.returncode == 0, res.stderr[-2000:]
     got = json.loads(res.stdout.strip().splitlines()[-1])
     assert got["devices"] == 4
     assert got["status"] == list(table["status"])
     ok = table["status"] == "ok"
-    for k in sweep.METRICS:
+    for k in metrics.METRICS:
         np.testing.assert_array_equal(np.array(got[k], float)[ok], table[k][ok], err_msg=k)
 
 
@@ -155,17 +163,17 @@ jax.config.update("jax_num_cpu_devices", 1)
 jax.distributed.initialize(coordinator_address=sys.argv[1], num_processes=2, process_id=int(sys.argv[2]),
                            initialization_timeout=120, heartbeat_timeout_seconds=30)
 import numpy as np, jaxcrank as jc
-from jaxcrank import sweep
+from jaxcrank import sampling, sweep
 sys.path.insert(0, {tests!r})
 from test_sweep import NAMES, SHORT, TOLERANCES
-names, x = sweep.monte_carlo(TOLERANCES, 6, seed=0)
+names, x = sampling.monte_carlo(TOLERANCES, 6, seed=0)
 tab = sweep.run(jc.paper(), names, x, SHORT, chunk=4, progress=False)
 ok = tab["status"] == "ok"
 print(json.dumps({{"processes": jax.process_count(), "devices": jax.device_count(), "ok": int(ok.sum()),
                   "mean": float(np.mean(tab["rms_transmission_angle_error_deg"][ok]))}}))
 jax.distributed.shutdown()
 """
-TOLERANCES = {"clearance_C": sweep.Tolerance(2.5e-4, 5e-5), "contact.memory_time": sweep.Tolerance(1e-5, 2e-6)}
+TOLERANCES = {"clearance_C": sampling.Tolerance(2.5e-4, 5e-5), "contact.memory_time": sampling.Tolerance(1e-5, 2e-6)}
 
 
 def test_two_processes_with_jax_distributed_give_the_one_process_monte_carlo_mean():
@@ -177,8 +185,17 @@ def test_two_processes_with_jax_distributed_give_the_one_process_monte_carlo_mea
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     env.pop("JAX_NUM_CPU_DEVICES", None)
     code = _WORKER.format(tests=str(ROOT / "tests"))
-    procs = [subprocess.Popen([sys.executable, "-c", code, f"127.0.0.1:{port}", str(i)], env=env, cwd=ROOT,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", code, f"127.0.0.1:{port}", str(i)],
+            env=env,
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(2)
+    ]
     try:
         outs = [p.communicate(timeout=600) for p in procs]
     finally:
@@ -187,7 +204,7 @@ def test_two_processes_with_jax_distributed_give_the_one_process_monte_carlo_mea
     for p, (_, err) in zip(procs, outs):
         assert p.returncode == 0, err[-2000:]
     got = [json.loads([ln for ln in o.splitlines() if ln.startswith("{")][-1]) for o, _ in outs]
-    names, x = sweep.monte_carlo(TOLERANCES, 6, seed=0)
+    names, x = sampling.monte_carlo(TOLERANCES, 6, seed=0)
     one = sweep.run(jc.paper(), names, x, SHORT, chunk=4, progress=False)
     ok = one["status"] == "ok"
     mean = float(np.mean(one["rms_transmission_angle_error_deg"][ok]))
@@ -197,53 +214,58 @@ def test_two_processes_with_jax_distributed_give_the_one_process_monte_carlo_mea
 
 
 def test_samplers():
-    names, x = sweep.latin_hypercube({"a": (0.0, 1.0), "b": (10.0, 20.0)}, 8, seed=3)
+    names, x = sampling.latin_hypercube({"a": (0.0, 1.0), "b": (10.0, 20.0)}, 8, seed=3)
     assert names == ["a", "b"] and x.shape == (8, 2)
     for j, (lo, hi) in enumerate([(0.0, 1.0), (10.0, 20.0)]):  # one sample per stratum
         assert sorted(np.floor((x[:, j] - lo) / (hi - lo) * 8).astype(int)) == list(range(8))
-    names, x = sweep.full_factorial({"a": [1, 2], "b": [3, 4, 5]})
+    names, x = sampling.full_factorial({"a": [1, 2], "b": [3, 4, 5]})
     assert x.shape == (6, 2) and {tuple(r) for r in x} == {(a, b) for a in (1, 2) for b in (3, 4, 5)}
     base = jc.paper()
-    names, x = sweep.one_at_a_time(base, {"rod_length": (0.40, 0.41), "offset": (0.0, 0.06)}, points=3)
+    names, x = sampling.one_at_a_time(base, {"rod_length": (0.40, 0.41), "offset": (0.0, 0.06)}, points=3)
     assert x.shape == (6, 2)
     assert np.all(x[:3, 1] == base.offset) and np.all(x[3:, 0] == base.rod_length)
-    tol = {"clearance_B": sweep.Tolerance(2.5e-4, 5e-5, "uniform"),
-           "rod_length": sweep.Tolerance(0.403, 1e-4, "normal")}
-    names, x = sweep.monte_carlo(tol, 4000, seed=1)
+    tol = {
+        "clearance_B": sampling.Tolerance(2.5e-4, 5e-5, "uniform"),
+        "rod_length": sampling.Tolerance(0.403, 1e-4, "normal"),
+    }
+    names, x = sampling.monte_carlo(tol, 4000, seed=1)
     assert np.all(np.abs(x[:, 0] - 2.5e-4) <= 5e-5)
     np.testing.assert_allclose(x[:, 1].std(), tol["rod_length"].sigma, rtol=0.05)
     np.testing.assert_allclose(x[:, 0].std(), tol["clearance_B"].sigma, rtol=0.05)
 
 
-@pytest.mark.parametrize("spec, match", [
-    ({"sampling": "sobol", "parameters": {"offset": {"values": [0.0]}}}, "sampling"),
-    ({"parameters": {}}, "at least one"),
-    ({"parameters": {"rod_lenght": {"values": [0.4]}}}, "rod_lenght"),
-    ({"sampling": "lhs", "parameters": {"offset": {"lower": 0.0}}}, "lower and upper"),
-    ({"sampling": "monte_carlo", "parameters": {"offset": {"nominal": 0.05}}}, "tolerance"),
-    ({"parameters": {"offset": {"values": [0.0]}}, "simulation": {"revolution": 2}}, "simulation"),
-    ({"parameters": {"offset": {"values": [0.0]}}, "metrics": ["peak_force"]}, "metrics"),
-    ({"parameters": {"offset": {"values": [0.0]}}, "colour": "red"}, "colour"),
-    ({"parameters": {"offset": {"values": [0.0]}}, "simulation": {"revolutions": -1}}, "revolutions"),
-])
+@pytest.mark.parametrize(
+    "spec, match",
+    [
+        ({"sampling": "sobol", "parameters": {"offset": {"values": [0.0]}}}, "sampling"),
+        ({"parameters": {}}, "at least one"),
+        ({"parameters": {"rod_lenght": {"values": [0.4]}}}, "rod_lenght"),
+        ({"sampling": "lhs", "parameters": {"offset": {"lower": 0.0}}}, "lower and upper"),
+        ({"sampling": "monte_carlo", "parameters": {"offset": {"nominal": 0.05}}}, "tolerance"),
+        ({"parameters": {"offset": {"values": [0.0]}}, "simulation": {"revolution": 2}}, "simulation"),
+        ({"parameters": {"offset": {"values": [0.0]}}, "metrics": ["peak_force"]}, "metrics"),
+        ({"parameters": {"offset": {"values": [0.0]}}, "colour": "red"}, "colour"),
+        ({"parameters": {"offset": {"values": [0.0]}}, "simulation": {"revolutions": -1}}, "revolutions"),
+    ],
+)
 def test_bad_specs_raise(spec, match):
     with pytest.raises(ParameterError, match=match):
-        sweep.spec_from_dict(spec)
+        sweep_spec.spec_from_dict(spec)
 
 
 def test_cli_sweep_writes_table_summary_figures_and_resumes(tmp_path, table):
     spec = tmp_path / "spec.toml"
     spec.write_text(
         'sampling = "grid"\nchunk = 2\nmetrics = ["max_abs_slider_x_deviation_m"]\n'
-        '[parameters.clearance_C]\nvalues = [2.5e-4, 3e-4]\n'
+        "[parameters.clearance_C]\nvalues = [2.5e-4, 3e-4]\n"
         '[parameters."contact.memory_time"]\nvalues = [1e-5]\n'
-        '[simulation]\nrevolutions = 0.03\nsamples_per_revolution = 1200\nmetrics_from_revolution = 0.01\n'
-        'max_steps = 20000\n')
+        "[simulation]\nrevolutions = 0.03\nsamples_per_revolution = 1200\nmetrics_from_revolution = 0.01\n"
+        "max_steps = 20000\n"
+    )
     out = tmp_path / "run"
     assert cli.main(["sweep", "--spec", str(spec), "--out", str(out), "--quiet", "--workers", "2"]) == 0
     tab = sweep.read_table(out / "table.csv")
-    np.testing.assert_array_equal(tab["max_abs_slider_x_deviation_m"],
-                                  table["max_abs_slider_x_deviation_m"][[0, 2]])
+    np.testing.assert_array_equal(tab["max_abs_slider_x_deviation_m"], table["max_abs_slider_x_deviation_m"][[0, 2]])
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status_counts"]["ok"] == 2 and summary["workers"] == 2 and summary["chunk"] == 2
     assert (out / "figures" / "heatmap_max_abs_slider_x_deviation_m.png").exists()

@@ -1,0 +1,155 @@
+"""Headline metrics accumulated during a solve, with memory that does not grow
+with the number of samples or steps.
+
+:class:`MetricsTracking` wraps a diffrax solver. After each step it
+
+- evaluates the signals of :data:`jaxcrank.metrics.PEAK_METRICS` at the step's end
+  and keeps their running maxima: the peaks over the solution, independent of the
+  output sample times (a step a few microseconds long resolves an impact, an
+  output sample every 0.1 deg of crank angle does not);
+- evaluates the signals of :data:`jaxcrank.metrics.RMS_METRICS` at the sample times
+  that fall in the step, from the step's dense output (the values ``SaveAt(ts=...)``
+  would store), and adds their squares: the RMS over the samples, the numbers of the
+  RMS of stored samples (to rounding). The sample times are equally spaced and
+  generated one at a time, so nothing is kept per sample.
+
+diffrax keeps a solver's state only for accepted steps, so rejected steps leave
+no trace. The window of every metric is ``t > t_start``; the peaks of the contact
+forces are also kept over the whole run. Forward mode only: the sample loop is a
+``while_loop``, which reverse-mode autodiff does not go through (gradients of RMS
+metrics use stored samples of short windows, :mod:`optim.objective`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from . import metrics, model
+
+
+class Running(NamedTuple):
+    """The accumulators (a solver-state entry): peaks over step ends in the window
+    and over the whole run (in the order of :data:`jaxcrank.metrics.PEAK_METRICS`),
+    sums of squares over the window's samples and their count (order of
+    :data:`jaxcrank.metrics.RMS_METRICS`), and the index of the next sample time."""
+
+    peaks: Float[Array, " peaks"]
+    whole_run_peaks: Float[Array, " peaks"]
+    sums: Float[Array, " rms"]
+    count: Int[Array, ""]
+    next_sample: Int[Array, ""]
+
+
+def _initial_peaks():
+    return jnp.array([-jnp.inf if metrics.METRICS[k][0] == "max" else 0.0 for k in metrics.PEAK_METRICS])
+
+
+def _peak_values(frame: model.Frame):
+    sig = metrics.signals(frame)
+    out = []
+    for name in metrics.PEAK_METRICS:
+        reduction, signal, _ = metrics.METRICS[name]
+        out.append(jnp.abs(sig[signal]) if reduction == "max_abs" else sig[signal])
+    return jnp.stack(out)
+
+
+class MetricsTracking(diffrax.AbstractAdaptiveSolver):
+    """A diffrax solver that steps like ``solver`` and accumulates the headline
+    metrics (:class:`Running`) in its state. ``args`` of the solve must be the
+    :class:`jaxcrank.Mechanism`.
+
+    Attributes:
+        solver: the solver that takes the steps (its steps, error estimates and dense
+            output are passed through unchanged).
+        first_sample, last_sample: the first and last of the equally spaced sample
+            times of the RMS metrics, s.
+        n_samples: number of sample times, >= 2 (static).
+        t_start: the metrics cover t > t_start, s.
+    """
+
+    solver: diffrax.AbstractSolver
+    first_sample: Float[Array, ""]
+    last_sample: Float[Array, ""]
+    n_samples: int = eqx.field(static=True)
+    t_start: Float[Array, ""] = eqx.field(kw_only=True)
+
+    def sample_time(self, k):
+        """The k-th sample time, s (the last one exactly ``last_sample``)."""
+        n = self.n_samples
+        step = (self.last_sample - self.first_sample) / (n - 1)
+        return jnp.where(k >= n - 1, self.last_sample, self.first_sample + k * step)
+
+    @property
+    def term_structure(self):
+        return self.solver.term_structure
+
+    @property
+    def interpolation_cls(self):  # pyright: ignore
+        return self.solver.interpolation_cls
+
+    def order(self, terms):
+        return self.solver.order(terms)
+
+    def strong_order(self, terms):
+        return self.solver.strong_order(terms)
+
+    def error_order(self, terms):
+        return self.solver.error_order(terms)
+
+    def init(self, terms, t0, t1, y0, args):
+        running = Running(
+            _initial_peaks(),
+            _initial_peaks(),
+            jnp.zeros(len(metrics.RMS_METRICS)),
+            jnp.zeros((), dtype=int),
+            jnp.zeros((), dtype=int),
+        )
+        return self.solver.init(terms, t0, t1, y0, args), running
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        inner, run = solver_state
+        y1, y_error, dense_info, inner, result = self.solver.step(terms, t0, t1, y0, args, inner, made_jump)
+        mech = args
+        value = _peak_values(model.evaluate(mech, t1, y1))
+        peaks = jnp.where(t1 > self.t_start, jnp.maximum(run.peaks, value), run.peaks)
+        whole = jnp.maximum(run.whole_run_peaks, value)
+
+        interpolation = self.solver.interpolation_cls(t0=t0, t1=t1, **dense_info)
+        n = self.n_samples
+
+        def pending(carry):
+            i = carry[0]
+            return (i < n) & (self.sample_time(i) <= t1)
+
+        def visit(carry):
+            i, sums, count = carry
+            t = self.sample_time(i)
+            inside = t > self.t_start
+            sig = metrics.rms_signals(model.evaluate(mech, t, interpolation.evaluate(t)))
+            return i + 1, sums + jnp.where(inside, sig**2, 0.0), count + inside.astype(count.dtype)
+
+        i, sums, count = jax.lax.while_loop(pending, visit, (run.next_sample, run.sums, run.count))
+        return y1, y_error, dense_info, (inner, Running(peaks, whole, sums, count, i)), result
+
+    def func(self, terms, t0, y0, args):
+        return self.solver.func(terms, t0, y0, args)
+
+
+def finish(running: Running) -> dict[str, Array]:
+    """The metrics of :data:`jaxcrank.metrics.METRICS` (plus
+    ``peak_contact_force_{B,C}_whole_run_N``) from the accumulators of a finished
+    solve; units as in the names. A window without samples gives an RMS of 0."""
+    out = {k: running.peaks[..., j] for j, k in enumerate(metrics.PEAK_METRICS)}
+    n = jnp.maximum(running.count, 1)[..., None]
+    rms = jnp.sqrt(running.sums / n)
+    out.update({k: rms[..., j] for j, k in enumerate(metrics.RMS_METRICS)})
+    for joint in "BC":
+        j = metrics.PEAK_METRICS.index(f"peak_contact_force_{joint}_N")
+        out[f"peak_contact_force_{joint}_whole_run_N"] = running.whole_run_peaks[..., j]
+    return {k: out[k] for k in list(metrics.METRICS) + [f"peak_contact_force_{j}_whole_run_N" for j in "BC"]}

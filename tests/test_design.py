@@ -1,0 +1,292 @@
+"""Many-variable design problems (optim/design.py): the constraint reparametrisation,
+the preset and its config round trip, the objective terms' gradients against
+central differences, constraints along an optimisation path, and the gradient-free
+baselines of bench/bench_design.py."""
+
+import dataclasses
+import math
+import tomllib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import tomli_w
+
+from jaxcrank.params import ParameterError
+from optim import cli
+from optim import objective as O
+from optim.design import DESIGN_VARIABLES, TERMS, DesignProblem, design_problem, geometry, ideal_stroke
+from optim.optimize import Settings, optimize
+
+# A non-chaotic window for exact-gradient checks (as tests/test_optim.py's EXACT):
+# the first 1.2 ms, tight tolerances, pathwise derivative.
+EXACT = O.Objective(t_start=0.0, t_end=1.2e-3, method="pathwise", rtol=1e-10, atol=1e-10, max_steps=100_000)
+
+
+def test_geometry_holds_the_stroke_transmission_and_assembly_over_the_box():
+    """Every (L2, alpha_min) of the preset's box, corners included: stroke within
+    0.1 mm (to rounding in fact), min transmission angle = its variable >= 40 deg,
+    L2 - L1 - e > 0, e >= 0, checked in closed form from the derived L1, e."""
+    prob = design_problem()
+    rng = np.random.default_rng(0)
+    u = np.concatenate(
+        [rng.uniform(size=(200, prob.n)), np.array(np.meshgrid([0, 1], [0, 1])).reshape(2, -1).T @ np.eye(2, prob.n)]
+    )
+    x = np.asarray(prob.from_unit(u))
+    c = prob.constraints(x)
+    assert np.max(np.abs(c["stroke_error_m"])) < 1e-12
+    assert np.all(c["min_transmission_angle_deg"] >= 40.0 - 1e-9)
+    np.testing.assert_allclose(c["min_transmission_angle_deg"], np.degrees(x[:, 1]), atol=1e-9)
+    assert np.all(c["assembly_margin_m"] > 0.05)
+    assert np.all(c["offset_m"] >= 0.0) and np.all(c["crank_length_m"] > 0.0)
+    assert prob.feasible(x).all()
+    # an independent check of the stroke: the slider's travel between its dead centres
+    # from the ideal kinematics (x3 over a fine crank-angle grid)
+    from jaxcrank import ideal
+
+    mech = prob.mechanism(jnp.asarray(x[0]))
+    th = jnp.linspace(0.0, 2 * math.pi, 20_001)
+    x3 = jax.vmap(lambda t: ideal.positions(mech, t)[3])(th / float(mech.crank_speed))
+    assert float(jnp.max(x3) - jnp.min(x3)) == pytest.approx(prob.stroke, abs=1e-7)
+
+
+def test_geometry_derivatives_are_the_implicit_functions():
+    """dL1/dL2, dL1/dalpha, de/d... of the bisection + Newton step against central
+    differences of the same solve (the bisection itself has zero derivative)."""
+    f = lambda p: jnp.stack(geometry(p[0], p[1], p[2]))  # noqa: E731
+    p = np.array([0.41, math.radians(55.0), 0.24])
+    jac = np.asarray(jax.jacrev(f)(jnp.asarray(p)))
+    for j in range(3):
+        h = 1e-6 * max(1.0, abs(p[j]))
+        e = np.zeros(3)
+        e[j] = h
+        fd = (np.asarray(f(jnp.asarray(p + e))) - np.asarray(f(jnp.asarray(p - e)))) / (2 * h)
+        np.testing.assert_allclose(jac[:, j], fd, rtol=1e-6, atol=1e-9)
+
+    # the stroke stays put along the derivative: dS = 0 for any change of L2, alpha
+    def stroke_of(q):
+        l1, e = geometry(q[0], q[1], 0.24)
+        return ideal_stroke(l1, q[0], e)
+
+    assert np.max(np.abs(np.asarray(jax.grad(stroke_of)(jnp.asarray(p[:2]))))) < 1e-12
+    l1, e = geometry(p[0], p[1], p[2])
+    assert float(ideal_stroke(l1, p[0], e)) == pytest.approx(0.24, abs=1e-14)
+
+
+def test_preset_has_nine_variables_within_physical_bounds():
+    prob = design_problem()
+    assert prob.n >= 8
+    assert {
+        "rod_length",
+        "min_transmission_angle",
+        "clearance_B",
+        "clearance_C",
+        "rod_mass",
+        "rod_inertia_ratio",
+        "slider_mass",
+        "friction.coefficient",
+    } <= set(prob.names)
+    x = np.asarray(prob.from_unit(prob.start_unit()))
+    mech = prob.mechanism(jnp.asarray(x))
+    i = prob.names.index
+    assert float(mech.rod_inertia) == pytest.approx(
+        x[i("rod_inertia_ratio")] * x[i("rod_mass")] * x[i("rod_length")] ** 2
+    )
+    assert float(mech.joint_B.clearance) == pytest.approx(x[i("clearance_B")])
+    assert float(mech.friction.coefficient) == pytest.approx(x[i("friction.coefficient")])
+    lo, hi = prob.lower[i("rod_inertia_ratio")], prob.upper[i("rod_inertia_ratio")]
+    assert lo < 1 / 12 < hi < 0.25  # a uniform bar inside, below the dumbbell's 1/4
+
+
+def test_preset_round_trips_through_the_config(tmp_path):
+    prob, settings = cli.build({"problem": "design", "design": {"weights": [["rms_contact_force_N", 3e-5]]}})
+    assert isinstance(prob, DesignProblem) and dict(prob.weights) == {"rms_contact_force_N": 3e-5}
+    path = tmp_path / "optimize.toml"
+    path.write_text(tomli_w.dumps(cli._drop_none(cli.resolved(prob, settings, "design"))))
+    again, settings2 = cli.build(tomllib.loads(path.read_text()))
+    assert again == prob and settings2 == settings
+
+
+@pytest.mark.parametrize(
+    "change, match",
+    [
+        (dict(lower=(0.30,) + tuple(v[1] for v in DESIGN_VARIABLES[1:])), "out of reach"),
+        (dict(lower=(0.36, math.radians(35.0)) + tuple(v[1] for v in DESIGN_VARIABLES[2:])), "min_transmission_angle"),
+        (dict(names=("crank_length",) + tuple(v[0] for v in DESIGN_VARIABLES[1:])), "rod_length"),
+        (dict(weights=(("peak_contact_force_N", 1.0),)), "weights"),
+        (dict(stroke=-0.1), "stroke"),
+    ],
+)
+def test_bad_design_problems_raise(change, match):
+    with pytest.raises(ParameterError, match=match):
+        dataclasses.replace(design_problem(), **change)
+
+
+@pytest.fixture(scope="module")
+def exact_problem():
+    return design_problem(EXACT)
+
+
+@pytest.fixture(scope="module")
+def term_gradients(exact_problem):
+    """Each term of the objective (Eq. 19, rod and slider deviation, driving-moment
+    deviation, contact force) and the cost at a start design with 0.12 mm
+    clearances (the preset's 0.4 mm has no contact yet in the first 1.2 ms):
+    values, reverse-mode Jacobian with respect to the nine scaled variables, and
+    central differences (h = 1e-5 scaled; converged: h = 1e-6 agrees to ~1e-5)."""
+    prob = exact_problem
+    u0 = np.array(prob.start_unit())
+    u0[prob.names.index("clearance_B")] = u0[prob.names.index("clearance_C")] = 0.05
+
+    def all_terms(u):
+        x = prob.from_unit(u)
+        return jnp.append(prob.terms(x)[0], prob.cost(x))
+
+    terms = jax.jit(all_terms)
+    jac = np.asarray(jax.jit(jax.jacrev(all_terms))(u0))
+    h = 1e-5
+    fd = np.zeros_like(jac)
+    for j in range(prob.n):
+        e = np.zeros(prob.n)
+        e[j] = h
+        fd[:, j] = (np.asarray(terms(u0 + e)) - np.asarray(terms(u0 - e))) / (2 * h)
+    return np.asarray(terms(u0)), jac, fd
+
+
+CONTACT_CLEARANCE = pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "open: the pathwise derivative of the RMS contact force with respect to the clearances "
+        "differs from converged central differences by 0.2 % (602.0 vs 603.2 at clearance_B), "
+        "unchanged at rtol = atol = 1e-12, so not the solve's discretisation; the other "
+        "variables agree within 1e-4"
+    ),
+)
+
+
+@pytest.mark.parametrize(
+    "k",
+    [
+        pytest.param(k, marks=CONTACT_CLEARANCE) if name == "rms_contact_force_N" else k
+        for k, name in enumerate(list(TERMS) + ["cost"])
+    ],
+    ids=list(TERMS) + ["cost"],
+)
+def test_objective_term_gradient_matches_central_differences(term_gradients, k):
+    """Reverse-mode gradient of term ``k`` within 1e-4 of its largest entry of the
+    central differences, on the non-chaotic first 1.2 ms."""
+    vals, jac, fd = term_gradients
+    assert np.all(np.isfinite(jac[k])) and vals[k] > 0
+    scale = np.max(np.abs(fd[k]))
+    assert scale > 0
+    assert np.max(np.abs(jac[k] - fd[k])) <= 1e-4 * scale, (jac[k], fd[k])
+
+
+def test_contact_force_gradient_matches_central_differences_except_clearances(term_gradients):
+    """The wear term (contact force, N) has contact in the window and its gradient
+    along the seven variables other than the clearances matches within 1e-4."""
+    vals, jac, fd = term_gradients
+    k = list(TERMS).index("rms_contact_force_N")
+    assert vals[k] > 100.0
+    keep = [j for j in range(jac.shape[1]) if j not in (2, 3)]
+    assert np.max(np.abs(jac[k, keep] - fd[k, keep])) <= 1e-4 * np.max(np.abs(fd[k])), (jac[k], fd[k])
+
+
+def test_constraints_hold_at_every_iterate_of_an_optimisation_path(exact_problem):
+    """Adam with large steps (iterates pushed onto the box's faces), on the exact short
+    objective: every iterate has the stroke within 0.1 mm, alpha_min >= 40 deg and
+    L2 > L1 + e."""
+    prob = exact_problem
+    res = optimize(prob, Settings(max_iterations=6, learning_rate=0.5, gtol=0.0, xtol=0.0), progress=False)
+    xs = np.array([[h[f"{n}_SI"] for n in prob.names] for h in res["history"]])
+    assert len(xs) == 6
+    c = prob.constraints(xs)
+    assert np.max(np.abs(c["stroke_error_m"])) <= prob.stroke_tolerance
+    assert np.min(c["min_transmission_angle_deg"]) >= 40.0 - 1e-9
+    assert np.min(c["assembly_margin_m"]) > 0.0
+    assert prob.feasible(xs).all()
+    us = np.asarray(prob.to_unit(xs))
+    assert np.any((us <= 1e-12) | (us >= 1 - 1e-12))  # some iterate sits on a face of the box
+    assert res["final_objective"] < res["history"][0]["objective_deg"]
+
+
+def _bench():
+    """bench/bench_design.py as the module ``bench_design`` (on sys.path, so that its
+    spawned pool workers import it too)."""
+    import importlib
+    import sys
+    from pathlib import Path
+
+    bench = str(Path(__file__).resolve().parents[1] / "bench")
+    if bench not in sys.path:
+        sys.path.insert(0, bench)
+    return importlib.import_module("bench_design")
+
+
+class _SerialPool:
+    """A stand-in for the process pool: evaluates in this process."""
+
+    @staticmethod
+    def map(fn, items):
+        return map(fn, items)
+
+
+@pytest.fixture(scope="module")
+def bench_tiny():
+    B = _bench()
+    B._init("design_5var", B.TINY)  # the 5-variable design problem on a 2 ms window
+    return B
+
+
+@pytest.mark.parametrize("method", ["cma", "nelder_mead", "tpe", "sobol"])
+def test_each_baseline_runs_and_improves_on_its_start(bench_tiny, method):
+    B = bench_tiny
+    prob = B._W["problem"]
+    start = np.full(prob.n, 0.5)
+    f_start = B._score(start)
+    trace = B.METHODS[method](_SerialPool, prob.n, start, 0, 4.0)
+    values = [v for _, v in trace]
+    times = [t for t, _ in trace]
+    assert len(values) >= 10 and np.all(np.diff(times) >= 0)
+    assert min(values) < values[0]  # better than its first design
+    assert min(values) < f_start  # and than the common start design
+    best = B.best_so_far(trace)
+    assert all(b1 >= b2 for (_, b1), (_, b2) in zip(best, best[1:]))
+
+
+@pytest.mark.slow
+def test_bench_design_writes_the_schema(tmp_path):
+    """A tiny run of bench_design (2 ms window, 1 s budgets, one seed, the 2-variable
+    problem): design.json has the documented keys and the plot is written."""
+    import json
+
+    B = _bench()
+    out = tmp_path / "design.json"
+    B.main(["--tiny", "--seeds", "1", "--problems", "paper_2var", "--out", str(out)])
+    data = json.loads(out.read_text())
+    (p,) = data["problems"]
+    assert p["name"] == "paper_2var" and p["n_variables"] == 2
+    assert set(p["methods"]) == {"ours", "cma", "nelder_mead", "tpe", "sobol"}
+    for m in p["methods"].values():
+        assert {"time_to_1pct_s", "best", "compile_s", "time_to_1pct_s_with_compile"} <= set(m)
+        assert m["best"] >= p["best_value_any_method"]
+    assert "speedup_vs_best_gradient_free" in p
+    assert out.with_suffix(".png").exists()
+
+
+@pytest.mark.slow
+def test_ensemble_terms_have_the_exact_values_and_finite_gradients():
+    """The ensemble objective of the design problem (short window, tsit5 windows):
+    values equal the forward solve's terms, gradients finite, and the objective's
+    gradient is the weighted sum of the terms' gradients plus the cost's."""
+    prob = design_problem(O.Objective(t_start=0.02, t_end=0.03, window_solver="tsit5"))
+    x = jnp.asarray(prob.from_unit(prob.start_unit()))
+    vals = np.asarray(prob.ensemble_terms(x))
+    exact = np.asarray(prob.terms(x)[0])
+    np.testing.assert_allclose(vals, exact, rtol=1e-12)
+    jac = np.asarray(jax.jacrev(prob.ensemble_terms)(x))
+    g = np.asarray(jax.grad(prob.objective_value)(x))
+    assert np.all(np.isfinite(jac)) and np.all(np.isfinite(g))
+    expect = np.asarray(prob.weight_vector()) @ jac + np.asarray(jax.grad(prob.cost)(x))
+    np.testing.assert_allclose(g, expect, rtol=1e-10, atol=1e-14 * np.max(np.abs(expect)))
