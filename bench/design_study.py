@@ -101,9 +101,9 @@ def main(argv=None):
 
     # ---- the gradient's trend against secant slopes of the evaluator at Adam's best design:
     # scaled units, d objective / d u, secants over +-delta (clipped) along each axis
-    from optim.optimize import _compiled
+    from optim.optimize import programs
 
-    vg = _compiled(dataclasses.replace(prob, start=None), 10.0)[0]
+    vg = programs(dataclasses.replace(prob, start=None), 10.0)[0]
     u_a = np.asarray(prob.to_unit(x_adam))
     f_a = fu(u_a)
     grad_a = np.asarray(vg(jnp.asarray(u_a), f_a)[1]) * f_a

@@ -483,6 +483,39 @@ def table_window_gradients() -> str:
     )
 
 
+def table_design_gradient() -> str:
+    """The optimiser's value-and-gradient program: run, compile and start-up times, new processes."""
+    d = results("gradient")
+    rows = []
+    for name, c in d["configs"].items():
+        for run in ("cold", "warm"):
+            r = c[run]
+            rows.append(
+                [
+                    name,
+                    "empty cache" if run == "cold" else "cache of the run above",
+                    f"{fmt(r['trace_s'])} s",
+                    f"{fmt(r['xla_s'])} s",
+                    f"{fmt(r['ready_s'])} s",
+                    f"{fmt(r['run_s'])} s",
+                ]
+            )
+    out = table(
+        ["windows", "process", "trace (or load)", "XLA compile (or load)", "ready after start", "value + gradient"],
+        rows,
+    )
+    cli = d["cli"]
+    out += "\n" + table(
+        ["`" + cli["command"].strip() + "`", "wall time", "iterations", "final objective (deg)"],
+        [
+            [run, f"{fmt(cli[run]['wall_s'])} s", cli[run]["iterations"], f"{cli[run]['final_objective_deg']:.5f}"]
+            for run in ("cold", "warm")
+        ],
+    )
+    load = f"load average {d['load_average_start']:.1f} at the start, {d['load_average_end']:.1f} at the end"
+    return out + source("gradient") + f"*Machine {load} (2 cores; above 2 the timings are contended).*\n"
+
+
 def headline() -> str:
     """The README's headline table: a few numbers, each from a JSON file named in its row."""
     s, st, sw, gpu = results("solvers"), results("step_cost"), results("sweep"), results("sweep_h100")
@@ -510,6 +543,19 @@ def headline() -> str:
             f"sweep of paper runs, one {gpu['machine']['device'].split('NVIDIA ')[-1]}, chunk {gpu['best']['batch']}",
             f"{fmt(gpu['best']['designs_per_s'])} designs/s",
             "`sweep_h100.json`",
+        ],
+    ]
+    g = results("gradient")["configs"]["forward_rodas4 (default)"]
+    rows += [
+        [
+            "design gradient, paper problem and window: value + ensemble gradient, after compile (2 cores)",
+            f"{fmt(g['cold']['run_s'])} s",
+            "`gradient.json`",
+        ],
+        [
+            "its compilation in a new process / ready in a second process (compilation cache)",
+            f"{fmt(g['cold']['trace_s'] + g['cold']['xla_s'])} s / {fmt(g['warm']['ready_s'])} s",
+            "`gradient.json`",
         ],
     ]
     for problem in results("design")["problems"]:
@@ -559,6 +605,7 @@ TABLES = {
     "sweep": table_sweep,
     "sweep_gpu": table_sweep_gpu,
     "optim": table_optim,
+    "design_gradient": table_design_gradient,
     "window_gradients": table_window_gradients,
     "headline": headline,
 }

@@ -6,6 +6,10 @@ reads it back), ``checkpoint.npz`` and ``history.csv`` (after every iteration),
 vmap grid over the box with the optimiser's path; two-variable problems) and
 ``result.json`` (start and final design, reduction in percent, grid best).
 
+The optimiser's compiled programs are kept in a cache folder (:mod:`jaxcrank.cache`;
+``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
+loads them instead of tracing and compiling again.
+
 Config TOML (every key optional)::
 
     problem = "paper"            # or "tolerance", "robust", "design" (optim/design.py)
@@ -40,8 +44,8 @@ from pathlib import Path
 
 import tomli_w
 
+from jaxcrank import cache, reference
 from jaxcrank import config as mech_config
-from jaxcrank import reference
 from jaxcrank.params import ParameterError
 
 from .objective import Objective
@@ -76,6 +80,13 @@ def add_parser(sub):
         help="reuse the landscape (Eq. 19 values) of an earlier run's grid.csv over the same box and "
         "objective instead of solving the grid again (the cost term is recomputed)",
     )
+    p.add_argument(
+        "--cache-dir",
+        type=Path,
+        help="JAX's persistent compilation cache: a later run loads the compiled gradient instead of "
+        "compiling it again (default: $JAXCRANK_CACHE_DIR or ~/.cache/jaxcrank/xla)",
+    )
+    p.add_argument("--no-cache", action="store_true", help="do not read or write the compilation cache")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -177,6 +188,8 @@ def run(args) -> int:
 
     cfg = _settings(args)
     problem, settings = build(cfg)
+    if not args.no_cache:
+        cache.enable(args.cache_dir)
     # read a reused landscape before the optimisation, so a bad file fails at once
     reused = (
         search.read_grid(args.grid_from, problem, args.grid)

@@ -11,7 +11,8 @@ Two ways to evaluate it (``Objective.method``):
     One solve from the pins-centred start to ``t_end``; F and its reverse-mode
     gradient through the whole solve. Exact, and meaningful only for windows
     shorter than the impact chaos' horizon (a few ms on the paper preset): over
-    the paper's window the gradient is ~1e27 (README, "Known limitation").
+    the paper's window the gradient is ~1e27 (docs/numerics.md, "Gradients beyond
+    the first impacts").
 
 ``"ensemble"`` (default)
     The value is still the exact Eq. 19 (one forward solve); the gradient is the
@@ -19,21 +20,31 @@ Two ways to evaluate it (``Objective.method``):
     forward solve gives the pins' state in their bearings at the start of K short
     windows spread over the evaluation window; each window is re-solved from that
     state (held fixed, carried over to the design being differentiated) with an
-    implicit solver, in one ``vmap`` of per-window reverse-mode gradients, and the
-    window gradients are summed. Finite, and a trend estimate rather than the
-    derivative of a chaotic F: it leaves out how the statistics of the start states
-    move with the design. Evidence and the measured choices: README, "Design
-    optimisation"; ``python -m optim.scans``.
+    implicit solver, one after another, and the derivative of the windows' pooled
+    Eq. 19 is the gradient. Finite, and a trend estimate rather than the derivative
+    of a chaotic F: it leaves out how the statistics of the start states move with
+    the design. Evidence and the measured choices: docs/optimisation.md;
+    ``python -m optim.scans``.
+
+The windows are differentiated in forward mode by default
+(``Objective.window_gradient = "forward"``: ``diffrax.ForwardMode``, one tangent per
+design variable), which compiles in about half the time of reverse mode for the
+few variables of a design problem. Such an objective is differentiated with
+:func:`value_and_grad` (``jax.jacfwd``), not ``jax.grad``; ``"reverse"`` restores
+reverse mode.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Literal, NamedTuple
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxcrank import laws, model
 from jaxcrank.outputs import transmission_angle_error
@@ -55,19 +66,23 @@ class Objective(eqx.Module):
         windows: number of ensemble windows, spread evenly over the evaluation
             window (0: all windows, tiling it).
         window_max_steps: step budget of each window (accepted + rejected); a
-            window that exceeds it is left out of the ensemble (under ``vmap`` every
-            window waits for the slowest, so one stuck window costs the whole budget).
+            window that exceeds it is left out of the ensemble.
         window_solver: solver of the ensemble windows. An L-stable one: an
             explicit solver's step sequence sits at its stability limit in stick
             phases (friction ramp) and the derivative of its discrete solution then
-            blows up in about 1 % of windows (README, "Design optimisation";
-            ``bench/window_gradients.py``). Default ``kvaerno5``; the linearly
-            implicit ``rodas4`` gives the same gradients at rtol 1e-6 in a fraction
-            of the time but its reverse mode moves by up to 1.5 % between rtol 1e-6
-            and 1e-9 where kvaerno5's does not; kvaerno5's Newton iterations stall in
-            some stick phases (5 of the paper window's 100 windows needed 17 000 to
-            63 000 steps; ``window_max_steps`` leaves them out) (README, "Design
-            optimisation").
+            blows up in about 1 % of windows. Default the linearly implicit
+            ``rodas4``; ``kvaerno5`` gives the same gradients but its Newton
+            iterations stall in some stick phases (``window_max_steps`` leaves such
+            windows out). Measurements: docs/optimisation.md, "The gradient";
+            ``bench/window_gradients.py``.
+        window_gradient: ``"forward"`` (``diffrax.ForwardMode``; differentiate with
+            :func:`value_and_grad` or ``jax.jacfwd``) or ``"reverse"``
+            (``jax.grad``). The ensemble method only; pathwise is always reverse.
+        on_failure: ``"raise"`` (a failed long solve, or more than half of the
+            ensemble windows failing, raises when the program runs; a host callback)
+            or ``"nan"`` (the value is NaN instead, and the program holds no host
+            callback, so JAX's persistent compilation cache can store it; the caller
+            must check, as :func:`optim.optimize.optimize` does).
         rtol, atol: solver tolerances on the scaled state.
         max_steps: step budget of the long solve.
     """
@@ -79,7 +94,9 @@ class Objective(eqx.Module):
     window: float = eqx.field(static=True, default=2e-3)
     windows: int = eqx.field(static=True, default=25)
     window_max_steps: int = eqx.field(static=True, default=5_000)
-    window_solver: str = eqx.field(static=True, default="kvaerno5")
+    window_solver: str = eqx.field(static=True, default="rodas4")
+    window_gradient: Literal["forward", "reverse"] = eqx.field(static=True, default="forward")
+    on_failure: Literal["raise", "nan"] = eqx.field(static=True, default="raise")
     rtol: float = eqx.field(static=True, default=1e-6)
     atol: float = eqx.field(static=True, default=1e-6)
     max_steps: int = eqx.field(static=True, default=500_000)
@@ -94,6 +111,12 @@ class Objective(eqx.Module):
             raise ParameterError(f"samples_per_degree = {self.samples_per_degree:g} must be positive")
         if self.method not in ("ensemble", "pathwise"):
             raise ParameterError(f"objective method {self.method!r} is unknown; valid: 'ensemble', 'pathwise'")
+        if self.window_gradient not in ("forward", "reverse"):
+            raise ParameterError(
+                f"objective window_gradient {self.window_gradient!r} is unknown; valid: 'forward', 'reverse'"
+            )
+        if self.on_failure not in ("raise", "nan"):
+            raise ParameterError(f"objective on_failure {self.on_failure!r} is unknown; valid: 'raise', 'nan'")
         if self.method == "ensemble" and not 0.0 < self.window <= self.t_end - self.t_start:
             raise ParameterError(
                 f"ensemble window = {self.window:g} s must be in (0, t_end - t_start = {self.t_end - self.t_start:g}] s"
@@ -143,9 +166,14 @@ def pathwise_errors(mech: Mechanism, obj: Objective = Objective()):
 
 
 def pathwise(mech: Mechanism, obj: Objective = Objective()):
-    """Eq. 19 from one solve from the pins-centred start, degrees (raises if the solve fails)."""
-    _, _, err = eval_samples(mech, obj, True, obj.grid(mech))
-    return jnp.sqrt(jnp.mean(err**2))
+    """Eq. 19 from one solve from the pins-centred start, degrees (if the solve fails:
+    raises, or NaN with ``obj.on_failure = "nan"``)."""
+    sim, _, err = eval_samples(mech, obj, obj.on_failure == "raise", obj.grid(mech))
+    return _nan_unless(sim.ok, jnp.sqrt(jnp.mean(err**2)))
+
+
+def _nan_unless(ok, x):
+    return jnp.where(ok, x, jnp.nan)
 
 
 class Starts(NamedTuple):
@@ -169,8 +197,9 @@ def reference(mech: Mechanism, obj: Objective = Objective()):
     value (degrees) and the :class:`Starts` of the ensemble windows."""
     grid = obj.grid(mech)
     mech = jax.lax.stop_gradient(mech)
-    sim, n_start, err = eval_samples(mech, obj, True, grid)
-    return jax.lax.stop_gradient(jnp.sqrt(jnp.mean(err**2))), window_starts(sim, n_start, grid, obj)
+    sim, n_start, err = eval_samples(mech, obj, obj.on_failure == "raise", grid)
+    exact = _nan_unless(sim.ok, jnp.sqrt(jnp.mean(err**2)))
+    return jax.lax.stop_gradient(exact), window_starts(sim, n_start, grid, obj)
 
 
 def window_starts(sim, n_start: int, grid, obj: Objective) -> Starts:
@@ -208,20 +237,26 @@ def solve_window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, o
     """Window ``i`` re-solved for ``mech`` from :func:`start_state`: its sample
     times (n_window,) s, scaled states (zero where the solve failed, so a failed
     window is reported by the caller, not propagated as NaN) and whether it finished."""
-    ts = starts.t[i] + dt * jnp.arange(n_window + 1)
+    # local time from the window's start (the crank angle carries the offset): diffrax then
+    # sees concrete times and compiles no run-time checks of them (host callbacks, which
+    # JAX's persistent compilation cache does not store)
+    y0 = start_state(mech, starts, i)
+    mech = eqx.tree_at(lambda m: m.initial_crank_angle, mech, mech.initial_crank_angle + mech.crank_speed * starts.t[i])
+    ts = dt * np.arange(n_window + 1)
     sim = simulate(
         mech,
         ts=ts,
-        y0=start_state(mech, starts, i),
+        y0=y0,
         solver=obj.window_solver,
         rtol=obj.rtol,
         atol=obj.atol,
         max_steps=obj.window_max_steps,
         throw=False,
+        adjoint=diffrax.ForwardMode() if obj.window_gradient == "forward" else None,
     )
     ok = sim.ok & jnp.all(jnp.isfinite(sim.ys))
     # the requested times, not sim.ts: a failed diffrax solve fills its ts with inf
-    return ts[1:], jnp.where(ok, sim.ys, 0.0)[1:], ok
+    return starts.t[i] + ts[1:], jnp.where(ok, sim.ys, 0.0)[1:], ok
 
 
 def _window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: Objective):
@@ -234,44 +269,57 @@ def window_gradients(mech: Mechanism, starts: Starts, obj: Objective = Objective
     """Each window's sum of squared transmission-angle errors (deg^2), shape (K,),
     whether its solve succeeded (K,), and its gradient with respect to every
     parameter of ``mech`` (a Mechanism of (K,) arrays), each window re-solved from
-    :func:`start_state`. The windows are one ``vmap`` of per-window reverse-mode
-    gradients (``bench/window_gradients.py`` looks at their distribution)."""
+    :func:`start_state`, one after another (:func:`over_windows`), each with its
+    reverse-mode gradient (``bench/window_gradients.py`` looks at their distribution);
+    always reverse mode, whatever ``obj.window_gradient``."""
     _, _, n_window, dt = obj.grid(mech)
+    obj = dataclasses.replace(obj, window_gradient="reverse")
     params, static = eqx.partition(mech, _is_float)
     params = jax.tree.map(lambda x: jax.lax.stop_gradient(jnp.asarray(x)), params)
 
     def one(p, i):
         return _window(eqx.combine(p, static), starts, i, n_window, dt, obj)
 
-    (sq, ok), grads = jax.vmap(jax.value_and_grad(one, has_aux=True), in_axes=(None, 0))(
-        params, jnp.arange(starts.t.shape[0])
-    )
+    (sq, ok), grads = over_windows(lambda i: jax.value_and_grad(one, has_aux=True)(params, i), starts)
     return sq, ok, grads
 
 
-def ensemble(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
-    """Eq. 19 assembled from the windows of :func:`window_gradients`, degrees;
-    its reverse-mode gradient is the ensemble sum of the windows' gradients."""
-    _, _, n_window, _ = obj.grid(mech)
-    sq, ok, grads = window_gradients(mech, starts, obj)
-    # A window the implicit solver cannot finish within its step budget (rare: a
-    # stick phase under a large contact force) is left out of the ensemble.
+WINDOWS_FAILED = (
+    "jaxcrank: more than half of the ensemble windows failed; raise "
+    "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window"
+)
+
+
+def windows_ok(ok, obj: Objective):
+    """The number of finished windows (a scalar); fewer than half of ``ok`` raises
+    (``obj.on_failure = "raise"``) or makes it NaN (``"nan"``)."""
     n_ok = jnp.sum(ok)
-    n_ok = eqx.error_if(
-        n_ok,
-        n_ok < 0.5 * ok.shape[0],
-        "jaxcrank: more than half of the ensemble windows failed; raise "
-        "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window",
-    )
-    w = ok.astype(sq.dtype)
-    # First-order surrogate: value sum(sq), gradient the sum of the window gradients.
-    params, _ = eqx.partition(mech, _is_float)
-    sg = jax.lax.stop_gradient
-    total = sg(jnp.sum(w * sq)) + sum(
-        jnp.sum(sg(jnp.tensordot(w, g, axes=1)) * (jnp.asarray(p) - sg(p)))
-        for p, g in zip(jax.tree.leaves(params), jax.tree.leaves(grads))
-    )
-    return jnp.sqrt(total / (n_window * n_ok))
+    enough = n_ok >= 0.5 * ok.shape[0]
+    if obj.on_failure == "raise":
+        return eqx.error_if(n_ok, ~enough, WINDOWS_FAILED)
+    return jnp.where(enough, n_ok, jnp.nan)
+
+
+def over_windows(fun, starts: Starts):
+    """``fun(i)`` for every ensemble window ``i`` of ``starts``, stacked: one window
+    after another (``jax.lax.map``). Under ``vmap`` every window would step as long as
+    the slowest one; in sequence each takes its own steps, and the program compiles
+    faster (measurements: docs/optimisation.md, "A gradient in seconds")."""
+    return jax.lax.map(fun, jnp.arange(starts.t.shape[0]))
+
+
+def ensemble(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
+    """Eq. 19 pooled over the ensemble windows re-solved for ``mech`` from the fixed
+    ``starts``, degrees. Its derivative (forward or reverse mode, as
+    ``obj.window_gradient``) is the ensemble sum of the windows' derivatives.
+
+    A window the implicit solver cannot finish within its step budget (rare: a
+    stick phase under a large contact force) is left out; more than half failing
+    is an error (:func:`windows_ok`)."""
+    _, _, n_window, dt = obj.grid(mech)
+    sq, ok = over_windows(lambda i: _window(mech, starts, i, n_window, dt, obj), starts)
+    n_ok = windows_ok(ok, obj)
+    return jnp.sqrt(jnp.sum(jnp.where(ok, sq, 0.0)) / (n_window * n_ok))
 
 
 def value(mech: Mechanism, obj: Objective = Objective()):
@@ -286,3 +334,26 @@ def value(mech: Mechanism, obj: Objective = Objective()):
     estimate = ensemble(mech, starts, obj)
     sg = jax.lax.stop_gradient
     return exact + (estimate - sg(estimate))
+
+
+def forward_mode(obj: Objective) -> bool:
+    """Whether an objective with settings ``obj`` is differentiated in forward mode."""
+    return obj.method == "ensemble" and obj.window_gradient == "forward"
+
+
+def value_and_grad(fun, forward: bool):
+    """``fun``'s value and gradient with respect to its first argument (a vector),
+    by ``jax.jacfwd`` (``forward``: one tangent per entry) or ``jax.value_and_grad``.
+    ``fun`` returns a scalar."""
+    if not forward:
+        return jax.value_and_grad(fun)
+
+    def both(x, *args):
+        def with_value(x):
+            v = fun(x, *args)
+            return v, v
+
+        grad, v = jax.jacfwd(with_value, has_aux=True)(x)
+        return v, grad
+
+    return both

@@ -42,9 +42,12 @@ import numpy as np
 import optax
 from tqdm.auto import tqdm
 
+from jaxcrank import cache
 from jaxcrank.errors import CorruptFileError
 from jaxcrank.params import ParameterError
+from jaxcrank.solve import SimulationError
 
+from .objective import forward_mode, value_and_grad
 from .problem import Problem
 
 METHODS = ("adam", "lbfgs")
@@ -93,11 +96,25 @@ def _optimizer(settings: Settings):
 
 
 @functools.lru_cache(maxsize=8)
-def _compiled(problem: Problem, penalty: float):
-    """Compiled functions of ``problem`` on the scaled design ``u``, objective divided
-    by ``f0`` (an argument, so a resumed or repeated run reuses the compilation):
-    value-and-gradient inside the feasible set, L-BFGS's extension beyond it, and the
-    pathwise objective at an SI design (the start value ``f0``)."""
+def programs(problem: Problem, penalty: float = 10.0):
+    """The optimiser's compiled programs of ``problem``, on the scaled design ``u``
+    (n,) with the objective divided by ``f0`` (an argument, so a resumed or repeated
+    run reuses them; pass 1.0 for degrees).
+
+    Args:
+        problem: the design problem; its ``start`` is not part of the programs
+            (pass ``dataclasses.replace(problem, start=None)`` to share them between starts).
+        penalty: weight of L-BFGS's out-of-set penalty.
+
+    Returns ``(value_and_grad, extended)``: ``value_and_grad(u, f0) -> (value, grad (n,))``
+    inside the feasible set (forward or reverse mode, as the objective says) and
+    L-BFGS's extension ``extended(u, f0) -> value`` beyond it. Each is traced and
+    compiled at its first call, or loaded from :mod:`jaxcrank.cache` when that is
+    enabled and an earlier process stored it. A failed evaluation is NaN
+    (``Objective.on_failure = "nan"`` and :func:`jaxcrank.cache.checks_as_nan`: no
+    host callback in the programs, so they can be cached); :func:`optimize` checks.
+    """
+    problem = dataclasses.replace(problem, objective=dataclasses.replace(problem.objective, on_failure="nan"))
 
     def inside(u, f0):
         return problem.objective_value(problem.from_unit(u)) / f0
@@ -106,10 +123,47 @@ def _compiled(problem: Problem, penalty: float):
         p = problem.project(u)
         return inside(p, f0) + penalty * jnp.sum((u - p) ** 2)
 
+    args = (jax.ShapeDtypeStruct((problem.n,), jnp.float64), jax.ShapeDtypeStruct((), jnp.float64))
+    vg = value_and_grad(inside, forward_mode(problem.objective))
     return (
-        jax.jit(jax.value_and_grad(inside)),
-        jax.jit(outside),
-        jax.jit(lambda x: problem.objective_value(x, method="pathwise")),
+        _Lazy(lambda: cache.exported(vg, ("optim.value_and_grad", problem), *args)),
+        _Lazy(lambda: cache.exported(outside, ("optim.extended", problem, penalty), *args)),
+    )
+
+
+class _Lazy:
+    """A program made at its first use (L-BFGS's extension is not needed by Adam)."""
+
+    def __init__(self, make):
+        self._make, self._fun = make, None
+
+    def _get(self):
+        if self._fun is None:
+            self._fun = self._make()
+        return self._fun
+
+    def __call__(self, *args):
+        return self._get()(*_strong(args))
+
+    def lower(self, *args):
+        return self._get().lower(*_strong(args))
+
+
+def _strong(args):
+    # float64 numpy arrays: a Python float or a weakly typed array would make jit compile
+    # the same program a second time for the other argument type
+    return [np.asarray(a, dtype=np.float64) for a in args]
+
+
+def _checked(problem: Problem, u, value, grad):
+    """``value, grad``, or SimulationError naming the design where they are not finite."""
+    if np.isfinite(float(value)) and np.all(np.isfinite(np.asarray(grad))):
+        return value, grad
+    x = ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, np.asarray(problem.from_unit(u))))
+    raise SimulationError(
+        f"the objective could not be evaluated at {x}: the long solve did not reach t_end within "
+        "Objective.max_steps, or more than half of the ensemble windows failed; raise max_steps or "
+        "window_max_steps, loosen rtol/atol, or shorten Objective.window"
     )
 
 
@@ -165,7 +219,7 @@ def optimize(
     """
     opt = _optimizer(settings)
     # the start is not part of the compiled programs: runs from other starts share them
-    value_and_grad, extended, start_value = _compiled(dataclasses.replace(problem, start=None), settings.penalty)
+    vg, extended = programs(dataclasses.replace(problem, start=None), settings.penalty)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"
     if resume:
         if ckpt is None or not ckpt.exists():
@@ -187,7 +241,10 @@ def optimize(
         quiet, converged = meta["quiet"], meta["converged"]
     else:
         u = problem.start_unit()
-        f0 = float(start_value(problem.from_unit(u)))
+        # the objective at the start (degrees) scales the rest; its evaluation is iteration 0's
+        first = _checked(problem, u, *vg(u, 1.0))
+        f0 = float(first[0])
+        first = (first[0] / f0, first[1] / f0)
         state, history, quiet, converged = opt.init(u), [], 0, None
 
     done_here = 0
@@ -197,7 +254,10 @@ def optimize(
     )
     while converged is None and len(history) < settings.max_iterations:
         tic = time.perf_counter()
-        value, grad = value_and_grad(u, f0)
+        if not history and not resume:
+            value, grad = first
+        else:
+            value, grad = _checked(problem, u, *vg(u, f0))
         x = problem.from_unit(u)
         proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
         if settings.method == "adam":

@@ -22,7 +22,7 @@ import optax
 from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
 from jaxcrank.sampling import Tolerance, monte_carlo
 
-from .objective import Objective, value
+from .objective import Objective, forward_mode, value, value_and_grad
 
 
 @dataclasses.dataclass(frozen=True)
@@ -206,8 +206,15 @@ class Problem:
         terms = [self.cost_reference / x[i] for i, nm in enumerate(self.names) if nm.startswith("clearance_")]
         return self.cost_weight * sum(terms) if terms else jnp.zeros(())
 
+    def value_and_grad(self, x):
+        """The objective (degrees) at SI design ``x`` (n,) and its gradient (n,), degrees
+        per SI unit, by forward or reverse mode as the objective's settings say
+        (:func:`optim.objective.forward_mode`). Traceable; ``jax.jit`` it."""
+        return value_and_grad(self.objective_value, forward_mode(self.objective))(x)
+
     def objective_value(self, x, method: str | None = None):
-        """Total objective at SI design ``x``: Eq. 19 (degrees) + cost."""
+        """Total objective at SI design ``x``: Eq. 19 (degrees) + cost. Differentiate it
+        with :meth:`value_and_grad` (the default ensemble windows are forward-mode)."""
         obj = self.objective if method is None else dataclasses.replace(self.objective, method=method)
         if not self.samples:
             return value(self.mechanism(x), obj) + self.cost(x)

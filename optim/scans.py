@@ -52,7 +52,7 @@ def gradient(problem: Problem, x0, method: str):
     """d objective / d x (deg per SI unit) at SI design x0 with ``method``."""
     obj = dataclasses.replace(problem.objective, method=method)
     prob = dataclasses.replace(problem, objective=obj)
-    return np.asarray(jax.jit(jax.grad(prob.objective_value))(jnp.asarray(x0, dtype=float)))
+    return np.asarray(jax.jit(prob.value_and_grad)(jnp.asarray(x0, dtype=float))[1])
 
 
 def local_slopes(problem: Problem, x0, half_width: float, points: int, progress=False):

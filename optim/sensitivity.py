@@ -12,8 +12,9 @@ the gradient here is the ensemble-sensitivity estimate. One solve at the design
 gives the exact metric values and the pins' states in their bearings at the start
 of K short windows; each window is re-solved from that state (carried over to the
 perturbed design) with an implicit solver, the per-window sums of squares are
-differentiated in one ``vmap`` of reverse-mode Jacobians, and the ensemble mean is
-taken.
+differentiated (forward mode by default, one tangent per parameter;
+``Objective.window_gradient = "reverse"`` for reverse-mode Jacobians), and the
+ensemble mean is taken.
 
 Valid for: time averages of squared deviations, i.e. the RMS metrics
 (transmission-angle error, rod-centre and slider x deviation, driving-moment
@@ -34,7 +35,7 @@ from jaxcrank import metrics, model
 from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
 from jaxcrank.solve import simulate
 
-from .objective import Objective, solve_window, window_starts
+from .objective import Objective, forward_mode, solve_window, window_starts
 
 #: metrics whose gradient the ensemble estimate follows: the RMS metrics of
 #: :mod:`jaxcrank.metrics` (units in the suffix)
@@ -102,7 +103,18 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     x0 = jnp.array([get_parameter(mech, n) for n in names])
 
     def jac(i):
-        sums, vjp, ok = jax.vjp(lambda x: window_sums(mech, names, x, starts, i, n_window, dt, obj), x0, has_aux=True)
+        def sums_of(x):
+            return window_sums(mech, names, x, starts, i, n_window, dt, obj)
+
+        if forward_mode(obj):  # one tangent per parameter
+
+            def with_aux(x):
+                sums, ok = sums_of(x)
+                return sums, (sums, ok)
+
+            rows, (sums, ok) = jax.jacfwd(with_aux, has_aux=True)(x0)
+            return sums, rows, ok
+        sums, vjp, ok = jax.vjp(sums_of, x0, has_aux=True)
         (rows,) = jax.vmap(vjp)(jnp.eye(sums.shape[0]))
         return sums, rows, ok
 
