@@ -16,7 +16,6 @@ checked there; they were checked when the concrete mechanism was built.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import equinox as eqx
@@ -397,21 +396,3 @@ def parameter_unit(name: str) -> str:
     (dimensionless)."""
     get_parameter(Mechanism(), name)  # raises on unknown names
     return _UNITS[name.rsplit(".", 1)[-1]]
-
-
-def float_parameter_names(mech: Mechanism | None = None) -> list[str]:
-    """Dotted names of every numeric parameter of ``mech`` (default: the paper preset),
-    the set :func:`set_parameter` accepts besides ``clearance_B`` / ``clearance_C``."""
-    mech = Mechanism() if mech is None else mech
-    names = []
-    for field in dataclasses.fields(mech):
-        value = getattr(mech, field.name)
-        if isinstance(value, eqx.Module):
-            names += [
-                f"{field.name}.{f.name}"
-                for f in dataclasses.fields(value)
-                if not isinstance(getattr(value, f.name), (str, bool, eqx.Module))
-            ]
-        elif not isinstance(value, (str, bool)):
-            names.append(field.name)
-    return names

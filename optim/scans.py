@@ -55,16 +55,6 @@ def gradient(problem: Problem, x0, method: str):
     return np.asarray(jax.jit(prob.value_and_grad)(jnp.asarray(x0, dtype=float))[1])
 
 
-def local_slopes(problem: Problem, x0, half_width: float, points: int, progress=False):
-    """Least-squares slope of the objective over x0 +- half_width along each
-    variable (deg per SI unit), and the scan values, shape (n, points)."""
-    offsets = np.linspace(-half_width, half_width, points)
-    xs = np.concatenate([line(x0, i, offsets) for i in range(problem.n)])
-    values, _ = search.evaluate(problem, xs, chunk=points, progress=progress)
-    values = values.reshape(problem.n, points)
-    return np.array([least_squares_slope(offsets, v) for v in values]), values
-
-
 def run(
     problem: Problem,
     out: Path,

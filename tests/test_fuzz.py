@@ -12,6 +12,7 @@ docs/reliability.md."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -19,6 +20,7 @@ import tempfile
 import zlib
 from pathlib import Path
 
+import equinox as eqx
 import numpy as np
 import pytest
 import tomli_w
@@ -28,7 +30,7 @@ from hypothesis import strategies as st
 import jaxcrank as jc
 from jaxcrank import cli, config, sweep
 from jaxcrank import spec as sweep_spec
-from jaxcrank.params import ParameterError, float_parameter_names
+from jaxcrank.params import Mechanism, ParameterError
 
 from . import fuzz
 
@@ -194,7 +196,26 @@ _LOWER = {
     "stick_speed": (0.0, True),
     "slip_speed": (0.0, False),
 }
-NUMERIC = float_parameter_names()
+
+
+def _numeric_parameter_names() -> list[str]:
+    """Dotted names of every numeric parameter of the paper preset: the set
+    ``set_parameter`` accepts besides ``clearance_B`` / ``clearance_C``."""
+    mech, names = Mechanism(), []
+    for field in dataclasses.fields(mech):
+        value = getattr(mech, field.name)
+        if isinstance(value, eqx.Module):
+            names += [
+                f"{field.name}.{f.name}"
+                for f in dataclasses.fields(value)
+                if not isinstance(getattr(value, f.name), (str, bool, eqx.Module))
+            ]
+        elif not isinstance(value, (str, bool)):
+            names.append(field.name)
+    return names
+
+
+NUMERIC = _numeric_parameter_names()
 
 
 def _message_name(path: str) -> str:
