@@ -8,10 +8,13 @@ import platform
 import time
 
 
-def timed(fn):
-    """``(fn(), seconds)``: the wall time of one call, its results ready."""
+def timed(fn, warmup: int = 0):
+    """``(fn(), seconds)``: the wall time of one call, its results ready, after ``warmup``
+    untimed calls (e.g. 1 to leave compilation out)."""
     import jax
 
+    for _ in range(warmup):
+        jax.block_until_ready(fn())
     start = time.perf_counter()
     out = fn()
     jax.block_until_ready(out)

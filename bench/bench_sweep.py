@@ -39,6 +39,8 @@ import sys
 import time
 from pathlib import Path
 
+from _common import machine, timed  # bench/ is on sys.path; imports JAX lazily
+
 
 def _setup():
     import jax
@@ -64,20 +66,14 @@ def _settings(revolutions):
     return sweep.Settings(revolutions=revolutions, metrics_from_revolution=min(1.0, revolutions / 4))
 
 
-def _timed(fn):
-    tic = time.perf_counter()
-    out = fn()
-    return out, time.perf_counter() - tic
-
-
 def loop(n, revolutions):
     jax, jc, sweep = _setup()
     names, xs = _designs(n)
     settings = _settings(revolutions)
     base = jc.paper()
     one = jax.jit(lambda x: sweep.simulate_design(base, names, x, settings))
-    _, first = _timed(lambda: [jax.block_until_ready(one(x)) for x in xs])
-    _, wall = _timed(lambda: [jax.block_until_ready(one(x)) for x in xs])
+    _, first = timed(lambda: [jax.block_until_ready(one(x)) for x in xs])
+    _, wall = timed(lambda: [jax.block_until_ready(one(x)) for x in xs])
     return _entry("loop", 1, 1, 1, n, first, wall)
 
 
@@ -106,8 +102,8 @@ def batched(n, batch, revolutions, workers=1):
     if workers > 1:
         return _workers(jc.paper(), names, xs, settings, workers)
     run = lambda: sweep.run(base, names, xs, settings, chunk=chunk, progress=False)  # noqa: E731
-    table, first = _timed(run)
-    wall = _timed(run)[1]
+    table, first = timed(run)
+    wall = timed(run)[1]
     failed = int(sum(s != "ok" for s in table["status"]))
     return _entry("batch", chunk, jax.device_count(), 1, n, first, wall, failed)
 
@@ -203,8 +199,6 @@ def main(argv=None):
         r["end_to_end_vs_loop"] = r["end_to_end_designs_per_s"] / base["end_to_end_designs_per_s"]
         if r["designs_per_s"] is not None:
             r["after_compile_vs_loop"] = r["designs_per_s"] / base["designs_per_s"]
-
-    from _common import machine
 
     report = {
         "machine": machine(),

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
 
 import diffrax
@@ -34,17 +33,10 @@ import jax.numpy as jnp
 
 jax.config.update("jax_enable_x64", True)
 
-from _common import machine  # noqa: E402
+from _common import machine, timed  # noqa: E402
 
 import jaxcrank as jc  # noqa: E402
 from jaxcrank import model, solve  # noqa: E402
-
-
-def _timed(fn, *args):
-    jax.block_until_ready(fn(*args))  # compile
-    tic = time.perf_counter()
-    out = jax.block_until_ready(fn(*args))
-    return out, time.perf_counter() - tic
 
 
 def field_cost(mech, traced: bool, n=200_000):
@@ -60,9 +52,11 @@ def field_cost(mech, traced: bool, n=200_000):
 
     if traced:
         m = jax.tree_util.tree_map(lambda x: jnp.asarray(x) if isinstance(x, float) else x, mech)
-        _, wall = _timed(jax.jit(loop), y0, m)
+        f = jax.jit(loop)
+        _, wall = timed(lambda: f(y0, m), warmup=1)
     else:
-        _, wall = _timed(jax.jit(lambda y: loop(y, mech)), y0)
+        f = jax.jit(lambda y: loop(y, mech))
+        _, wall = timed(lambda: f(y0), warmup=1)
     return wall / n * 1e6
 
 
@@ -81,7 +75,8 @@ def vjp_cost(mech, n=100_000):
 
         return jax.lax.fori_loop(0, n, body, (y, jnp.zeros_like(y)))[1]
 
-    _, wall = _timed(jax.jit(loop), y0, m0)
+    f = jax.jit(loop)
+    _, wall = timed(lambda: f(y0, m0), warmup=1)
     return wall / n * 1e6
 
 
@@ -105,7 +100,8 @@ def loop_overhead(size, t1, n_samples, steps):
         )
         return sol.ys, sol.stats["num_steps"]
 
-    (_, n), wall = _timed(run, jnp.zeros(size))
+    y0 = jnp.zeros(size)
+    (_, n), wall = timed(lambda: run(y0), warmup=1)
     return wall / int(n) * 1e6
 
 
@@ -115,7 +111,7 @@ def main(argv=None):
     a = p.parse_args(argv)
     mech = jc.paper()
     ts = solve.sample_times(mech)
-    sim, wall = _timed(lambda: solve.simulate(mech, ts=ts))
+    sim, wall = timed(lambda: solve.simulate(mech, ts=ts), warmup=1)
     attempts = int(sim.num_steps) + int(sim.num_rejected)
     field_static = field_cost(mech, traced=False)
     field_traced = field_cost(mech, traced=True)

@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 from pathlib import Path
 
 import diffrax
 import jax
 import numpy as np
 import optimistix as optx
+from _common import machine  # bench/ is on sys.path (python bench/stiffness.py)
 
 import jaxcrank as jc
 from jaxcrank import model, solve
@@ -127,7 +127,7 @@ def main(argv=None):
 
     contact = (in_b & in_c)[idx]
     out = {
-        "machine": {"platform": platform.platform(), "jax": jax.__version__},
+        "machine": machine(),
         "t1_s": args.t1,
         "solver": "tsit5",
         "rtol": 1e-6,

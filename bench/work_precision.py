@@ -17,16 +17,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
-import time
 from pathlib import Path
 
-import jax
 import numpy as np
+from _common import machine, timed  # bench/ is on sys.path (python bench/work_precision.py)
 
 import jaxcrank as jc
-from jaxcrank import outputs, runtime, solve
+from jaxcrank import outputs, solve
 
 RUNS = {"tsit5": [1e-4, 1e-5, 1e-6, 1e-7, 1e-8], "rodas4": [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8]}
 
@@ -35,13 +32,10 @@ def paper_run(mech, t1, solver, tol):
     """(trajectory columns, wall time after compilation, compile time, accepted, rejected)."""
 
     def go():
-        start = time.perf_counter()
-        sim = solve.simulate(mech, t1, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000)
-        jax.block_until_ready(sim.ys)
-        return sim, time.perf_counter() - start
+        return solve.simulate(mech, t1, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000)
 
-    _, first = go()  # compiles
-    sim, wall = go()
+    _, first = timed(go)  # compiles
+    sim, wall = timed(go)
     return outputs.trajectory(sim), wall, max(first - wall, 0.0), int(sim.num_steps), int(sim.num_rejected)
 
 
@@ -64,13 +58,7 @@ def main(argv=None):
     ref, ref_wall, _, ref_steps, _ = paper_run(mech, args.t1, "tsit5", 1e-10)
     check, *_ = paper_run(mech, args.t1, "rodas4", 1e-9)
     report = {
-        "machine": {
-            "platform": platform.platform(),
-            "jax": jax.__version__,
-            "device": str(jax.devices()[0]),
-            "cpus_usable": len(os.sched_getaffinity(0)),
-            **runtime.describe(),
-        },
+        "machine": machine(),
         "t1_s": args.t1,
         "error_window_s": args.error_window,
         "reference": {
