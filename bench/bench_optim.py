@@ -61,7 +61,7 @@ def main(argv=None):
     h = res["history"]
     first = h[0]["seconds"]
     # the final design evaluated by the grid's own compiled solve: two differently compiled
-    # solves of one design round differently, and impact chaos amplifies that (README)
+    # solves of one design round differently, and impact chaos amplifies that (docs/optimisation.md, "Time to optimum")
     on_grid = float(search.evaluate(prob, np.asarray([res["final"]]), chunk=args.grid, progress=False)[0][0])
     out["adam_ensemble_gradient"] = {
         "objective_deg": on_grid,

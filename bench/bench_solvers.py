@@ -142,7 +142,7 @@ def gradient_timing(mech, t1, tol):
         "checkpoints": n_steps,
         "adjoint_floor": adjoint_floor(n_steps, ts),
         "note": "compile = trace and lower + XLA compile. Over 20 ms both derivatives are the chaotic "
-        "pathwise one (~1e27, README 'Known limitation'); this times the work, "
+        "pathwise one (~1e27, docs/numerics.md 'Gradients beyond the first impacts'); this times the work, "
         "tests/test_gradients.py checks that the two modes agree on 1.2 ms",
     }
 

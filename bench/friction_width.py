@@ -1,4 +1,4 @@
-"""Cost of the friction ramp width on the paper run (README, "Friction ramp width").
+"""Cost of the friction ramp width on the paper run (docs/numerics.md, "Friction ramp width").
 
     python bench/friction_width.py [--t1 0.4] [--out bench/results/friction_width.json]
 

@@ -8,7 +8,7 @@ Error: the largest difference from a reference solution (tsit5 at rtol = atol =
 1e-10, checked against rodas4 at 1e-9) of the slider position (m) and of the
 normal contact force at C (N) over the first ``--error-window`` s (default 10 ms:
 the start-up impacts, before the motion is chaotic; later the trajectories of any
-two solvers part, see README). Work: wall time after compilation of the whole
+two solvers part, see docs/numerics.md). Work: wall time after compilation of the whole
 paper run (``--t1``, default 0.4 s, one sample per 0.1 deg), and the compile time. Writes the JSON and a
 work-precision plot beside it; nothing is asserted.
 """

@@ -170,8 +170,11 @@ TOML spec (SI units; every key but [parameters] optional):
   samples = 64         # lhs, random, monte_carlo: number of designs
   points = 11          # oat: points per line
   seed = 0             # lhs, random, monte_carlo
-  chunk = 1            # designs solved together (and per checkpoint); default 1 per device on a
-                       # CPU (each solved alone), 1024 per device on a GPU (vmap batches)
+  chunk = 1            # designs solved together (and per checkpoint); default: 1 per device on
+                       # a CPU (each solved alone); on a GPU the largest vmap batch per device
+                       # that fits in 80 % of its free memory (1024 per device where the
+                       # backend reports none); a chunk needing more than the free memory
+                       # is refused
   metrics = ["max_abs_slider_x_deviation_m", "peak_contact_force_C_N"]  # plotted (all are computed)
 
   [parameters.clearance_B]          # any parameter: clearance_B, rod_length, contact.restitution, ...
@@ -184,7 +187,7 @@ TOML spec (SI units; every key but [parameters] optional):
   [mechanism]          # the base mechanism, as in `jaxcrank simulate`'s config.toml
 
 Several CPU cores: --workers N (N local processes). Several devices: every local
-device is used (a GPU machine's GPUs). Several machines: see README, "Sweeps on a cluster".
+device is used (a GPU machine's GPUs). Several machines: see docs/sweeps.md, "On a cluster".
 """
 
 

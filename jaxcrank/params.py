@@ -183,7 +183,8 @@ class Friction(eqx.Module):
             paper's rod inertia (J2 = 2.2e-4 kg m^2) and impact forces of ~10 kN
             at pin C, a 1e-4 m/s ramp makes pin sticking stiff to ~1e10 1/s
             (measured: the explicit solve stalls at dt ~ 2e-10 s); 1e-2 m/s is
-            still below typical slip speeds (0.1-0.5 m/s). See README.
+            still below typical slip speeds (0.1-0.5 m/s). See docs/numerics.md, "Friction
+            ramp width".
     """
 
     law: AbstractFrictionLaw = SmoothRamp()

@@ -30,7 +30,8 @@ A sweep is a table of designs over named parameters (any name
 Which chunk is fastest depends on the device (``bench/bench_sweep.py``): on a CPU a
 design solved alone (``chunk = 1`` per device, the default there) beats any ``vmap``
 batch, which steps every member until the slowest one finishes and selects each
-update per member; a GPU needs batches of thousands (default 1024 per device).
+update per member; a GPU needs batches of thousands (default: the largest batch that fits
+in its free memory, :func:`default_chunk`).
 
 Reproducibility: a design's numbers do not depend on its batch mates, its position
 in the batch, the batch size (>= 2), the number of devices, processes or workers

@@ -319,8 +319,9 @@ def test_optimiser_reaches_the_trend_optimum_of_the_grid_on_short_settings(short
     last bit of rounding. The optimiser follows the trend (ensemble gradient): it must
     end at the design where the grid's least-squares plane is lowest, and its value
     there must equal the grid's value of the same design up to the ~0.5 % by which two
-    compilations of a chaotic solve differ (README, "Results on the paper window").
-    The paper window's runs in the README compare with the grid's best directly."""
+    compilations of a chaotic solve differ (docs/optimisation.md, "Time to optimum").
+    The paper window's runs in docs/optimisation.md ("Results on the paper window") compare
+    with the grid's best directly."""
     prob, res = short_run
     grid = search.grid_search(prob, n=5, chunk=25, progress=False)
     assert grid.ok[grid.feasible].all()

@@ -89,7 +89,7 @@ def test_reverse_mode_is_the_derivative_of_the_fixed_step_solution(paper):
     differences of the same discrete solution within 1e-7 (relative), w.r.t.
     L1 and L2. (With adaptive steps diffrax holds the step sizes fixed in reverse
     mode, so there the two differ by how much the solution moves with its step
-    sequence; README, "Design optimisation".)"""
+    sequence.)"""
     t1 = 1.2e-3
     ts = jnp.linspace(0.0, t1, 121)
 
