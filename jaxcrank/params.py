@@ -129,17 +129,28 @@ class Contact(eqx.Module):
             m/s. Guards the damping term chi * delta_dot / delta_dot_minus against
             grazing contacts (division by ~0). Impacts slower than this are damped
             as if they arrived at this speed.
-        memory_time: relaxation time of the approach-speed memory state, s.
-            While a joint is separated the memory follows the normal speed's
-            time derivative exactly and relaxes onto the normal speed with this
-            time constant (which erases the offset left by the last rebound);
+        memory_time: relaxation time of the approach-speed memory state, s,
+            away from the walls. While a joint is separated the memory follows
+            the normal speed's time derivative exactly and relaxes onto the
+            normal speed (which erases the offset left by the last rebound);
             during contact it is frozen, so it holds the speed at the onset of
-            the impact. Must be shorter than the free flights between impacts
-            (0.1-1 ms here); shorter values make the problem stiffer.
-        freeze_width: penetration range just before contact, m, over which the
-            memory is frozen smoothly rather than with a jump (keeps reverse-mode
-            gradients exact through impact onsets; see ``model.memory_tracking``).
-            The contact force is zero there, so its value barely affects physics.
+            the impact (``model.memory_relaxation``). Shorter values make the
+            problem stiffer everywhere; the fast reset near the walls is
+            ``reset_time``.
+        freeze_time: time to contact, s, at the current normal speed, over
+            which the memory's exact tracking is blended off before an onset
+            (and on again after a separation) rather than switched (keeps
+            reverse-mode gradients exact through impact onsets). The blend
+            weight is moment-matched, so the memory misses the onset speed by
+            only O((a t_f / v)^3) for a normal acceleration a
+            (``model.memory_tracking``). The contact force is zero there.
+        reset_window: time to or from the wall, s, at the current normal speed,
+            within which the memory relaxes with ``reset_time`` (fading out by
+            twice it); a separation is always followed by such a window, so a
+            re-impact microseconds later finds the memory reset.
+        reset_time: relaxation time of the memory inside ``reset_window``, s
+            (exp(-27) of the last impact's offset left with the defaults).
+            The solver resolves this decay: about 25 steps per separation.
     """
 
     law: AbstractContactLaw = Hybrid()
@@ -147,7 +158,9 @@ class Contact(eqx.Module):
     exponent: float = 1.5
     min_approach_speed: float = 1e-3
     memory_time: float = 1e-5
-    freeze_width: float = 1e-7
+    freeze_time: float = 1e-7
+    reset_window: float = 1e-6
+    reset_time: float = 5e-8
 
     def __check_init__(self):
         if not isinstance(self.law, AbstractContactLaw):
@@ -159,7 +172,9 @@ class Contact(eqx.Module):
         _check("exponent", self.exponent, low=1.0, high=3.0, low_open=False, high_open=False)
         _check("min_approach_speed", self.min_approach_speed, low=0.0, unit="m/s")
         _check("memory_time", self.memory_time, low=0.0, unit="s")
-        _check("freeze_width", self.freeze_width, low=0.0, unit="m")
+        _check("freeze_time", self.freeze_time, low=0.0, unit="s")
+        _check("reset_window", self.reset_window, low=0.0, unit="s")
+        _check("reset_time", self.reset_time, low=0.0, unit="s")
 
 
 class Friction(eqx.Module):
@@ -384,7 +399,9 @@ _UNITS = {
     "exponent": "1",
     "min_approach_speed": "m_s",
     "memory_time": "s",
-    "freeze_width": "m",
+    "freeze_time": "s",
+    "reset_window": "s",
+    "reset_time": "s",
     "coefficient": "1",
     "stick_speed": "m_s",
     "slip_speed": "m_s",

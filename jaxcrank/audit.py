@@ -1,0 +1,179 @@
+"""Audit of the approach-speed memory: at every contact onset of a run, the approach
+speed the damping uses against the true normal speed just before onset.
+
+The contact laws divide by ``delta_dot_minus``, the normal speed at the onset of an
+impact (model.md); jaxcrank carries it as a memory state per clearance joint
+(:func:`jaxcrank.model.memory_tracking`). :func:`onsets` solves a run as
+:func:`jaxcrank.simulate` does (same solver, controller and tolerances), keeps every
+accepted step and the solver's dense output, finds each step in which a penetration
+delta crosses zero upwards, locates the crossing by bisection on the dense output,
+and there compares
+
+* ``used``: ``max(memory, contact.min_approach_speed)``, the approach speed the
+  damping divides by during the impact (the memory is frozen from onset on), with
+* ``true``: delta_dot at the crossing, the true normal speed just before onset.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import model, solve
+from .params import Mechanism
+
+
+class Onsets(NamedTuple):
+    """The contact onsets of a run, one entry per onset, sorted by time (numpy arrays).
+
+    Attributes:
+        joint: joint name per onset ("B" or "C").
+        t: onset time, s.
+        true: delta_dot at onset, m/s (the true approach speed).
+        used: the approach speed the damping uses, m/s (memory floored at
+            ``contact.min_approach_speed``).
+        since_separation: time since the same joint's previous separation, s
+            (inf for its first onset).
+        max_gap: the largest gap -delta, m, at the solver's steps since that
+            separation (from the start for a first onset): how far the pin got
+            from the wall before coming back.
+        num_steps: accepted steps of the solve.
+    """
+
+    joint: np.ndarray
+    t: np.ndarray
+    true: np.ndarray
+    used: np.ndarray
+    since_separation: np.ndarray
+    max_gap: np.ndarray
+    num_steps: int
+
+    @property
+    def relative_error(self):
+        """``used / true - 1`` per onset."""
+        return self.used / self.true - 1.0
+
+    def summary(self, t_min=0.0, min_speed=None):
+        """Counts of onsets after ``t_min`` (s) with true approach speed above
+        ``min_speed`` (m/s; default: none excluded) whose relative error exceeds
+        0.5 %, 1 % and 10 %, with the median and the worst case (its joint, time,
+        used and true speeds)."""
+        keep = self.t > t_min
+        if min_speed is not None:
+            keep &= self.true > min_speed
+        err = np.abs(self.relative_error[keep])
+        out = {
+            "onsets": int(keep.sum()),
+            "over_0.5%": int((err > 0.005).sum()),
+            "over_1%": int((err > 0.01).sum()),
+            "over_10%": int((err > 0.1).sum()),
+            "median_abs_error": float(np.median(err)) if err.size else 0.0,
+            "num_steps": self.num_steps,
+        }
+        if err.size:
+            i = np.flatnonzero(keep)[np.argmax(err)]
+            out["worst"] = {
+                "joint": str(self.joint[i]),
+                "t_s": float(self.t[i]),
+                "used_m_s": float(self.used[i]),
+                "true_m_s": float(self.true[i]),
+                "relative_error": float(self.relative_error[i]),
+                "since_separation_s": float(self.since_separation[i]),
+                "max_gap_m": float(self.max_gap[i]),
+            }
+        return out
+
+
+def _joint_state(mech: Mechanism, t, y):
+    """(penetration, penetration rate, memory) per clearance joint at (t, y), shape (k,) each."""
+    state = model.unpack(mech, y)
+    q, qd, _ = model.coordinates(mech, state.deviation, state.deviation_rate, t)
+    pen, rate = [], []
+    for name in model.clearance_joints(mech):
+        pin, pin_vel, hole, hole_vel = model.joint_points(mech, name, q, qd, t)
+        d = pin - hole
+        eps = jnp.linalg.norm(d)
+        pen.append(eps - getattr(mech, f"joint_{name}").clearance)
+        rate.append(jnp.dot(d, pin_vel - hole_vel) / eps)
+    return jnp.stack(pen), jnp.stack(rate), state.approach_memory
+
+
+@eqx.filter_jit
+def _solve_dense(mech, t0, t1, y0, solver, controller, dt0, max_steps):
+    return diffrax.diffeqsolve(
+        diffrax.ODETerm(model.vector_field),
+        solver,
+        t0,
+        t1,
+        dt0,
+        y0,
+        args=mech,
+        saveat=diffrax.SaveAt(steps=True, dense=True),
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        throw=False,
+    )
+
+
+def onsets(mech: Mechanism, t1, *, t0=0.0, y0=None, options=solve.DEFAULTS, max_steps=200_000, bisections=60):
+    """Every contact onset of the run of ``mech`` from ``t0`` to ``t1`` (s) with the
+    numerical settings ``options`` (:class:`jaxcrank.SolveOptions`; the step budget
+    is ``max_steps``, which also sizes the stored steps). Returns :class:`Onsets`."""
+    solver = solve.make_solver(options.solver)
+    controller = solve.step_size_controller(solver, options.rtol, options.atol)
+    y0 = model.initial_state(mech) if y0 is None else y0
+    sol = _solve_dense(mech, jnp.asarray(t0, float), jnp.asarray(t1, float), y0, solver, controller, options.dt0, max_steps)
+    if sol.result != diffrax.RESULTS.successful:
+        raise solve.SimulationError(f"audit solve failed: {sol.result}")
+    n = int(sol.stats["num_accepted_steps"])
+    ts = np.concatenate([[float(t0)], np.asarray(sol.ts[:n])])
+    ys = np.concatenate([np.asarray(y0)[None], np.asarray(sol.ys[:n])])
+    state_at = jax.jit(jax.vmap(lambda t: _joint_state(mech, t, sol.evaluate(t))))
+    pen, _, _ = jax.jit(jax.vmap(lambda t, y: _joint_state(mech, t, y)))(ts, ys)
+    pen = np.asarray(pen)
+    joints = model.clearance_joints(mech)
+    records = []
+    for j, name in enumerate(joints):
+        p = pen[:, j]
+        up = np.flatnonzero((p[:-1] < 0.0) & (p[1:] >= 0.0))
+        down = np.flatnonzero((p[:-1] >= 0.0) & (p[1:] < 0.0))
+        if up.size == 0:
+            continue
+        lo, hi = ts[up].copy(), ts[up + 1].copy()
+        for _ in range(bisections):
+            mid = 0.5 * (lo + hi)
+            below = np.asarray(state_at(jnp.asarray(mid))[0][:, j]) < 0.0
+            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        _, rate, memory = state_at(jnp.asarray(hi))
+        # separation times: located to step precision (enough for "time since")
+        sep_t = 0.5 * (ts[down] + ts[down + 1])
+        for k, t_on in enumerate(hi):
+            prev = sep_t[sep_t < t_on]
+            first = down[sep_t < t_on][-1] + 1 if prev.size else 0
+            gap = -float(p[first : up[k] + 1].min())
+            records.append(
+                (
+                    name,
+                    t_on,
+                    float(rate[k, j]),
+                    max(float(memory[k, j]), float(mech.contact.min_approach_speed)),
+                    t_on - prev[-1] if prev.size else np.inf,
+                    gap,
+                )
+            )
+    records.sort(key=lambda r: r[1])
+    cols = list(zip(*records)) if records else [[]] * 6
+    return Onsets(
+        joint=np.asarray(cols[0], dtype=str),
+        t=np.asarray(cols[1], dtype=float),
+        true=np.asarray(cols[2], dtype=float),
+        used=np.asarray(cols[3], dtype=float),
+        since_separation=np.asarray(cols[4], dtype=float),
+        max_gap=np.asarray(cols[5], dtype=float),
+        num_steps=n,
+    )
