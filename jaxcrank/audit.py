@@ -127,7 +127,9 @@ def onsets(mech: Mechanism, t1, *, t0=0.0, y0=None, options=solve.DEFAULTS, max_
     solver = solve.make_solver(options.solver)
     controller = solve.step_size_controller(solver, options.rtol, options.atol)
     y0 = model.initial_state(mech) if y0 is None else y0
-    sol = _solve_dense(mech, jnp.asarray(t0, float), jnp.asarray(t1, float), y0, solver, controller, options.dt0, max_steps)
+    sol = _solve_dense(
+        mech, jnp.asarray(t0, float), jnp.asarray(t1, float), y0, solver, controller, options.dt0, max_steps
+    )
     if sol.result != diffrax.RESULTS.successful:
         raise solve.SimulationError(f"audit solve failed: {sol.result}")
     n = int(sol.stats["num_accepted_steps"])

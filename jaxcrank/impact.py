@@ -218,7 +218,9 @@ def reimpact(
     )
 
 
-def slow_approach(mech: Mechanism, approach_speed=0.02, deceleration=1e3, duration=1e-5, pin_mass=1.0, rtol=1e-10, atol=1e-12):
+def slow_approach(
+    mech: Mechanism, approach_speed=0.02, deceleration=1e3, duration=1e-5, pin_mass=1.0, rtol=1e-10, atol=1e-12
+):
     """An impact at ``approach_speed`` (m/s) on joint B's bearing wall reached under a
     normal deceleration: over the last ``duration`` (s) before onset the hole
     recedes with acceleration ``deceleration`` (m/s^2), so the approach speed
