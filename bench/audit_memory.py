@@ -3,10 +3,17 @@
 At every contact onset the approach speed the damping uses (the memory, floored at
 ``contact.min_approach_speed``) is compared with the true normal speed just before
 onset (:mod:`jaxcrank.audit`). Default tolerances, 0.4 s; the paper preset and the
-issue's setting (Hunt-Crossley, Ambrosio's friction ramp). Writes
+issue's setting (Hunt-Crossley, Ambrosio's friction ramp). Then the cost: the solver's
+accepted and rejected steps of the 0.4 s run (tsit5, default tolerances) of each setting,
+and over 21 runs with the restitution 0.9 +- 1e-3 in steps of 1e-4 (the step count of
+one run is chaotic: a 1e-4 change of restitution moves it by thousands). Writes
 ``bench/results/audit_memory.json``.
 
-    python bench/audit_memory.py [--t1 0.4]
+    python bench/audit_memory.py [--t1 0.4] [--no-steps]
+
+The "before" rows of docs/numerics.md are this script run with the jaxcrank of commit
+a11de35 (``git checkout a11de35 -- jaxcrank``; it has no ``jaxcrank.audit``: the step
+counts only, ``--no-audit``).
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ import numpy as np
 from _common import machine, timed
 
 import jaxcrank as jc
-from jaxcrank import audit, config
+from jaxcrank import config
 
 SETTINGS = {
     "paper": [],
@@ -27,13 +34,52 @@ SETTINGS = {
 }
 
 
+def steps(mech, t1: float) -> dict:
+    """Accepted and rejected tsit5 steps of ``mech`` over ``t1`` s (samples every 0.1 deg
+    as in `jaxcrank simulate`), for its restitution and 21 restitutions 0.9 +- 1e-3."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    def count(e):  # e traced (an array): one compilation for all 21
+        m = eqx.tree_at(lambda m: m.contact.restitution, mech, e)
+        sim = jc.simulate(m, t1)
+        return int(sim.num_steps), int(sim.num_rejected)
+
+    sim = jc.simulate(mech, t1)  # the preset itself, as `jaxcrank simulate` runs it
+    own = int(sim.num_steps), int(sim.num_rejected)
+    rs = [round(0.899 + 1e-4 * k, 4) for k in range(21)]
+    counts = [count(jnp.asarray(e)) for e in rs]
+    accepted = [c[0] for c in counts]
+    return {
+        "own": {"restitution": float(mech.contact.restitution), "accepted": own[0], "rejected": own[1]},
+        "restitutions": rs,
+        "accepted": accepted,
+        "rejected": [c[1] for c in counts],
+        "summary": {
+            "own_accepted": own[0],
+            "median_accepted": float(np.median(accepted)),
+            "min_accepted": min(accepted),
+            "max_accepted": max(accepted),
+            "median_rejected": float(np.median([c[1] for c in counts])),
+        },
+    }
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--t1", type=float, default=0.4)
+    parser.add_argument("--no-steps", action="store_true", help="skip the step counts")
+    parser.add_argument("--no-audit", action="store_true", help="step counts only")
     args = parser.parse_args()
-    report = {"machine": machine(), "t1_s": args.t1, "runs": {}}
-    for name, overrides in SETTINGS.items():
+    report = {"machine": machine(), "t1_s": args.t1, "runs": {}, "steps": {}}
+    if not args.no_steps:
+        for name, overrides in SETTINGS.items():
+            report["steps"][name] = steps(config.apply_overrides(jc.paper(), overrides), args.t1)
+            print(name, json.dumps(report["steps"][name]["summary"]), flush=True)
+    for name, overrides in ({} if args.no_audit else SETTINGS).items():
         mech = config.apply_overrides(jc.paper(), overrides)
+        from jaxcrank import audit
+
         onsets, wall = timed(lambda mech=mech: audit.onsets(mech, args.t1, max_steps=400_000))
         vmin = float(mech.contact.min_approach_speed)
         err = onsets.relative_error
@@ -56,7 +102,7 @@ def main():
             ],
         }
         print(name, json.dumps(report["runs"][name]["whole_run"]), flush=True)
-    out = Path(__file__).parent / "results" / "audit_memory.json"
+    out = Path(__file__).parent / "results" / ("audit_memory.json" if not args.no_audit else "steps_only.json")
     out.write_text(json.dumps(report, indent=1) + "\n")
 
 
