@@ -255,6 +255,7 @@ def test_each_baseline_runs_and_improves_on_its_start(bench_tiny, method):
     assert all(b1 >= b2 for (_, b1), (_, b2) in zip(best, best[1:]))
 
 
+@pytest.mark.long
 @pytest.mark.slow
 def test_bench_design_writes_the_schema(tmp_path):
     """A tiny run of bench_design (2 ms window, 1 s budgets, one seed, the 2-variable
@@ -275,6 +276,7 @@ def test_bench_design_writes_the_schema(tmp_path):
     assert out.with_suffix(".png").exists()
 
 
+@pytest.mark.long
 @pytest.mark.slow
 def test_ensemble_terms_have_the_exact_values_and_finite_gradients():
     """The ensemble objective of the design problem (short window, tsit5 windows):

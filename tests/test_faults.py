@@ -102,6 +102,7 @@ def _kill_at(code, out, env, progress_file, target, rng, timeout=600) -> bool:
     return killed
 
 
+@pytest.mark.slow  # worker subprocesses killed and restarted
 def test_sweep_killed_at_random_points_resumes_to_the_same_table(tmp_path):
     env = _env()
     _run(_SWEEP, tmp_path / "whole", env)
@@ -119,6 +120,7 @@ def test_sweep_killed_at_random_points_resumes_to_the_same_table(tmp_path):
         np.testing.assert_array_equal(again[k], whole[k], err_msg=k)
 
 
+@pytest.mark.long
 @pytest.mark.slow  # five subprocesses that each compile the objective's gradient (~2 min on 2 cores)
 def test_optimisation_killed_at_random_points_resumes_to_the_same_history(tmp_path):
     env = _env()

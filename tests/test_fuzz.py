@@ -85,6 +85,7 @@ def test_drawn_designs_solve_or_report_a_named_failure(mech):
     fuzz.assert_outcome(res)
 
 
+@pytest.mark.long
 @pytest.mark.slow
 @pytest.mark.parametrize("law, layout", fuzz.STRUCTURES, ids=[f"{a}-{b}" for a, b in fuzz.STRUCTURES])
 def test_drawn_designs_of_every_structure(law, layout):

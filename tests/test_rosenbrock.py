@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+import pytest
 
 import jaxcrank as jc
 from jaxcrank import model, outputs
@@ -86,6 +87,7 @@ def test_agrees_with_tsit5_on_the_paper_mechanism(paper):
         assert np.abs(cols[0][name] - cols[1][name]).max() < 1e-9, name
 
 
+@pytest.mark.slow  # about a minute of compilation
 def test_reverse_mode_is_the_derivative_of_the_fixed_step_solution(paper):
     """First 1.2 ms of the paper run (first impact at B), fixed steps of 0.2 us:
     reverse mode through Rodas4 (Jacobian, inverse, stages) matches central

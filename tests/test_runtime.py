@@ -74,7 +74,7 @@ X86 = platform.machine().lower() in ("x86_64", "amd64")
 
 
 @pytest.mark.skipif(jax.default_backend() != "cpu" or not X86, reason="x86 CPU compiler options")
-@pytest.mark.parametrize("solver", ["tsit5", "rodas4", "kvaerno5"])
+@pytest.mark.parametrize("solver", ["tsit5", "rodas4", pytest.param("kvaerno5", marks=pytest.mark.slow)])
 def test_solver_loop_is_one_kernel_in_this_process(solver):
     """The explicit default and both stiff solvers: no LAPACK call or matrix-product
     fusion inside the loop (jaxcrank.linalg, rosenbrock._combine) keeps it on the

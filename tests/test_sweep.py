@@ -72,6 +72,7 @@ def test_batch_size_does_not_change_a_design(table):
         np.testing.assert_array_equal(three[k], table[k], err_msg=k)
 
 
+@pytest.mark.slow  # two worker processes
 def test_workers_give_the_single_process_table():
     """Two local worker processes, each design solved alone (one per chunk), give the
     table of one process exactly, failures and invalid designs included."""
@@ -138,6 +139,7 @@ print(json.dumps({{"devices": jax.device_count(), "status": list(tab["status"]),
 """
 
 
+@pytest.mark.slow  # a subprocess with four host devices
 def test_sharded_over_four_host_devices_equals_one_device(table):
     env = dict(os.environ, JAX_NUM_CPU_DEVICES="4", JAX_PLATFORMS="cpu")
     res = subprocess.run(
@@ -176,6 +178,7 @@ jax.distributed.shutdown()
 TOLERANCES = {"clearance_C": sampling.Tolerance(2.5e-4, 5e-5), "contact.memory_time": sampling.Tolerance(1e-5, 2e-6)}
 
 
+@pytest.mark.slow  # two processes
 def test_two_processes_with_jax_distributed_give_the_one_process_monte_carlo_mean():
     import socket
 
