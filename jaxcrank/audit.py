@@ -23,6 +23,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from . import model, solve
 from .params import Mechanism
@@ -54,7 +55,7 @@ class Onsets(NamedTuple):
     num_steps: int
 
     @property
-    def relative_error(self):
+    def relative_error(self) -> Float[np.ndarray, " onsets"]:
         """``used / true - 1`` per onset."""
         return self.used / self.true - 1.0
 
@@ -120,7 +121,16 @@ def _solve_dense(mech, t0, t1, y0, solver, controller, dt0, max_steps):
     )
 
 
-def onsets(mech: Mechanism, t1, *, t0=0.0, y0=None, options=solve.DEFAULTS, max_steps=200_000, bisections=60):
+def onsets(
+    mech: Mechanism,
+    t1: Float[ArrayLike, ""],
+    *,
+    t0: Float[ArrayLike, ""] = 0.0,
+    y0: Float[ArrayLike, " state"] | None = None,
+    options=solve.DEFAULTS,
+    max_steps=200_000,
+    bisections=60,
+) -> Onsets:
     """Every contact onset of the run of ``mech`` from ``t0`` to ``t1`` (s) with the
     numerical settings ``options`` (:class:`jaxcrank.SolveOptions`; the step budget
     is ``max_steps``, which also sizes the stored steps). Returns :class:`Onsets`."""

@@ -14,23 +14,24 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from . import linalg
 from .params import Mechanism
 
 
-def crank_angle(mech: Mechanism, t):
+def crank_angle(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """theta1(t) = theta1_0 + omega t, rad."""
     return mech.initial_crank_angle + mech.crank_speed * t
 
 
-def crank_pin(mech: Mechanism, t):
+def crank_pin(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, " 2"]:
     """Crank pin centre P_B = L1 (cos theta1, sin theta1), m."""
     th1 = crank_angle(mech, t)
     return mech.crank_length * jnp.stack([jnp.cos(th1), jnp.sin(th1)])
 
 
-def positions(mech: Mechanism, t):
+def positions(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, " 4"]:
     """Ideal generalized positions Q = (x2 [m], y2 [m], theta2 [rad], x3 [m]).
 
     ``sin theta2 = (e - L1 sin theta1) / L2``, ``x3 = L1 cos theta1 + L2 cos theta2``.
@@ -47,7 +48,9 @@ def positions(mech: Mechanism, t):
     return jnp.stack([x2, y2, th2, x3])
 
 
-def kinematics(mech: Mechanism, t):
+def kinematics(
+    mech: Mechanism, t: Float[ArrayLike, ""]
+) -> tuple[Float[Array, " 4"], Float[Array, " 4"], Float[Array, " 4"]]:
     """Ideal (Q, dQ/dt, d2Q/dt2) at time t; units m, rad, and their per-second rates."""
     t = jnp.asarray(t, dtype=float)
 
@@ -58,7 +61,7 @@ def kinematics(mech: Mechanism, t):
     return q, qd, qdd
 
 
-def transmission_angle(rod_angle):
+def transmission_angle(rod_angle: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
     """Transmission angle alpha = arccos(-sin theta2), rad (paper Eq. 17-18).
 
     Equals ``arccos((L1 sin theta1 - e) / L2)`` for the ideal mechanism, and the
@@ -68,12 +71,12 @@ def transmission_angle(rod_angle):
     return jnp.arccos(jnp.clip(-jnp.sin(rod_angle), -1.0, 1.0))
 
 
-def mass_matrix(mech: Mechanism):
+def mass_matrix(mech: Mechanism) -> Float[Array, " 4"]:
     """Diagonal mass matrix of (x2, y2, theta2, x3): (m2, m2, J2, m3); kg, kg m^2."""
     return jnp.stack([mech.rod_mass, mech.rod_mass, mech.rod_inertia, mech.slider_mass])
 
 
-def rod_ends(mech: Mechanism, q):
+def rod_ends(mech: Mechanism, q: Float[ArrayLike, " 4"]) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
     """Rod joint-end points (B_rod, C_rod) for generalized positions q, m."""
     u2 = jnp.stack([jnp.cos(q[2]), jnp.sin(q[2])])
     centre = q[:2]
@@ -85,7 +88,9 @@ def _cross(r, f):
     return r[0] * f[1] - r[1] * f[0]
 
 
-def reactions(mech: Mechanism, q, residual, ideal_B: bool, ideal_C: bool):
+def reactions(
+    mech: Mechanism, q: Float[ArrayLike, " 4"], residual: Float[ArrayLike, " 4"], ideal_B: bool, ideal_C: bool
+) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
     """Forces on the rod from the pins of the *ideal* joints, N.
 
     ``residual = M q'' - F_applied`` (generalized, on (x2, y2, theta2, x3)) is what
@@ -117,7 +122,12 @@ def reactions(mech: Mechanism, q, residual, ideal_B: bool, ideal_C: bool):
     return f_b, f_c
 
 
-def driving_moment_from_pin_force(mech: Mechanism, t, force_on_rod_at_B, contact_point):
+def driving_moment_from_pin_force(
+    mech: Mechanism,
+    t: Float[ArrayLike, ""],
+    force_on_rod_at_B: Float[ArrayLike, " 2"],
+    contact_point: Float[ArrayLike, " 2"],
+) -> Float[Array, ""]:
     """Driving moment that keeps the crank at constant speed, N m.
 
     ``M = p x F_B + m1 g (L1/2) cos theta1``, where F_B is the force the crank pin
@@ -130,12 +140,12 @@ def driving_moment_from_pin_force(mech: Mechanism, t, force_on_rod_at_B, contact
     ) + mech.crank_mass * mech.gravity * 0.5 * mech.crank_length * jnp.cos(th1)
 
 
-def rod_gravity(mech: Mechanism):
+def rod_gravity(mech: Mechanism) -> Float[Array, " 4"]:
     """Generalized gravity force on (x2, y2, theta2, x3), N and N m."""
     return jnp.stack([0.0, -mech.rod_mass * mech.gravity, 0.0, 0.0])
 
 
-def driving_moment(mech: Mechanism, t):
+def driving_moment(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """Ideal driving moment by inverse dynamics, N m (the paper's Fig. 8 ideal curve)."""
     q, _, qdd = kinematics(mech, t)
     residual = mass_matrix(mech) * qdd - rod_gravity(mech)

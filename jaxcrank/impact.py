@@ -24,13 +24,20 @@ import diffrax
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 from . import model
 from .params import Mechanism
 
 
 @eqx.filter_jit
-def rebound_ratio(mech: Mechanism, approach_speed=0.5, pin_mass=1.0, rtol=1e-10, atol=1e-12):
+def rebound_ratio(
+    mech: Mechanism,
+    approach_speed: Float[ArrayLike, ""] = 0.5,
+    pin_mass: Float[ArrayLike, ""] = 1.0,
+    rtol=1e-10,
+    atol=1e-12,
+) -> Float[Array, ""]:
     """Radial rebound speed / approach speed of a pin (mass ``pin_mass``, kg) that
     reaches the wall of joint B's bearing at ``approach_speed`` (m/s), no
     gravity, no tangential motion. Contact law and restitution from ``mech``.
@@ -177,11 +184,11 @@ class WallImpact(NamedTuple):
 
 def reimpact(
     mech: Mechanism,
-    approach_speed=0.5,
-    second_speed=0.2,
-    delay=1e-6,
-    ramp=4e-6,
-    pin_mass=1.0,
+    approach_speed: Float[ArrayLike, ""] = 0.5,
+    second_speed: Float[ArrayLike, ""] = 0.2,
+    delay: Float[ArrayLike, ""] = 1e-6,
+    ramp: Float[ArrayLike, ""] = 4e-6,
+    pin_mass: Float[ArrayLike, ""] = 1.0,
     rtol=1e-10,
     atol=1e-12,
 ) -> WallImpact:
@@ -219,8 +226,14 @@ def reimpact(
 
 
 def slow_approach(
-    mech: Mechanism, approach_speed=0.02, deceleration=1e3, duration=1e-5, pin_mass=1.0, rtol=1e-10, atol=1e-12
-):
+    mech: Mechanism,
+    approach_speed: Float[ArrayLike, ""] = 0.02,
+    deceleration: Float[ArrayLike, ""] = 1e3,
+    duration: Float[ArrayLike, ""] = 1e-5,
+    pin_mass: Float[ArrayLike, ""] = 1.0,
+    rtol=1e-10,
+    atol=1e-12,
+) -> WallImpact:
     """An impact at ``approach_speed`` (m/s) on joint B's bearing wall reached under a
     normal deceleration: over the last ``duration`` (s) before onset the hole
     recedes with acceleration ``deceleration`` (m/s^2), so the approach speed

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from . import ideal
 from .model import Frame
@@ -91,13 +91,15 @@ def meanings() -> dict[str, str]:
     return {k: v[2] for k, v in METRICS.items()}
 
 
-def transmission_angle_deviation(rod_angle, ideal_rod_angle):
+def transmission_angle_deviation(
+    rod_angle: Float[ArrayLike, "*shape"], ideal_rod_angle: Float[ArrayLike, "*shape"]
+) -> Float[Array, "*shape"]:
     """Actual minus ideal transmission angle, degrees, from the actual and ideal rod
     angles theta2 (rad, any matching shapes) at the same crank angle."""
     return (ideal.transmission_angle(rod_angle) - ideal.transmission_angle(ideal_rod_angle)) * DEG
 
 
-def signals(frame: Frame) -> dict[str, Array]:
+def signals(frame: Frame) -> dict[str, Float[Array, "*samples"]]:
     """The per-sample signals of :data:`SIGNALS` from a :class:`jaxcrank.model.Frame`
     (one instant, or arrays of them along a leading axis), SI units and degrees."""
     q, qi = frame.q, frame.ideal_q
@@ -131,7 +133,7 @@ def reduce_signal(reduction: str, x: Float[Array, " n"], window: Float[Array, " 
     raise ValueError(f"unknown reduction {reduction!r}; valid: 'max_abs', 'max', 'rms'")
 
 
-def headline(frames: Frame, t_start) -> dict[str, Array]:
+def headline(frames: Frame, t_start: Float[ArrayLike, ""]) -> dict[str, Float[Array, ""]]:
     """:data:`METRICS` over the samples of ``frames`` (a :class:`jaxcrank.model.Frame`
     of arrays, e.g. :func:`jaxcrank.outputs.frames`) with time ``t > t_start`` (s).
 
@@ -144,12 +146,12 @@ def headline(frames: Frame, t_start) -> dict[str, Array]:
     return {name: reduce_signal(reduction, sig[signal], window) for name, (reduction, signal, _) in METRICS.items()}
 
 
-def window_samples(ts, t_start) -> int:
+def window_samples(ts: Float[ArrayLike, " n"], t_start: Float[ArrayLike, ""]) -> int:
     """Number of samples of ``ts`` (s, concrete) in the window ``t > t_start``."""
     return int(jnp.sum(jnp.asarray(ts) > t_start))
 
 
-def rms_signals(frame: Frame) -> Array:
+def rms_signals(frame: Frame) -> Float[Array, "*samples rms"]:
     """The signals behind :data:`RMS_METRICS`, stacked in that order along the last axis."""
     sig = signals(frame)
     return jnp.stack([sig[METRICS[k][1]] for k in RMS_METRICS], axis=-1)

@@ -32,6 +32,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
 
 from . import ideal, laws, linalg
 from .params import Joint, Material, Mechanism
@@ -64,21 +65,21 @@ class State(NamedTuple):
     dissipated_work: jax.Array  # work dissipated by contact damping and friction, J
 
 
-def unpack(mech: Mechanism, y) -> State:
+def unpack(mech: Mechanism, y: Float[ArrayLike, "*batch state"]) -> State:
     """The scaled state ``y`` (shape (..., :func:`state_size`)) as a :class:`State` in SI units."""
     phys = y * state_scales(mech)
     n, k = n_dof(mech), len(clearance_joints(mech))
     return State(phys[..., :n], phys[..., n : 2 * n], phys[..., 2 * n : 2 * n + k], phys[..., -2], phys[..., -1])
 
 
-def auxiliary(mech: Mechanism, y):
+def auxiliary(mech: Mechanism, y: Float[ArrayLike, "*batch state"]) -> Float[Array, "*batch aux"]:
     """The state entries after the coordinates and their rates (approach-speed
     memories, m/s, then driver and dissipated work, J), in SI units, shape
     (..., state_size - 2 n_dof): what :func:`state_from_eccentricities` takes as ``rest``."""
     return (y * state_scales(mech))[..., 2 * n_dof(mech) :]
 
 
-def length_scale(mech: Mechanism):
+def length_scale(mech: Mechanism) -> Float[Array, ""]:
     """Reference length of the deviations, m: the largest clearance (1 m if none)."""
     clearances = [getattr(mech, f"joint_{j}").clearance for j in clearance_joints(mech)]
     if not clearances:
@@ -86,7 +87,7 @@ def length_scale(mech: Mechanism):
     return jax.lax.stop_gradient(jnp.max(jnp.stack(clearances)))
 
 
-def state_scales(mech: Mechanism):
+def state_scales(mech: Mechanism) -> Float[Array, " state"]:
     """Physical value of one unit of each state entry.
 
     Lengths in clearances l, rod angle in l / L2 rad, velocities in those times
@@ -113,7 +114,7 @@ def state_scales(mech: Mechanism):
 # --------------------------------------------------------------------------- kinematics
 
 
-def full_positions(mech: Mechanism, s, t):
+def full_positions(mech: Mechanism, s: Float[ArrayLike, " dof"], t: Float[ArrayLike, ""]) -> Float[Array, " 4"]:
     """Full coordinates Q = (x2, y2, theta2, x3) from deviations s at time t."""
     qi = ideal.positions(mech, t)
     joints = clearance_joints(mech)
@@ -131,7 +132,9 @@ def full_positions(mech: Mechanism, s, t):
     return jnp.stack([centre[0], centre[1], th2, x3])
 
 
-def coordinates(mech: Mechanism, s, sd, t):
+def coordinates(
+    mech: Mechanism, s: Float[ArrayLike, " dof"], sd: Float[ArrayLike, " dof"], t: Float[ArrayLike, ""]
+) -> tuple[Float[Array, " 4"], Float[Array, " 4"], Float[Array, " 4"]]:
     """Full coordinates Q, their rate dQ/dt and ``gamma`` = d2Q/dt2 at zero s''
     (the velocity-product terms), from the deviations s, s' at time t."""
     t = jnp.asarray(t, dtype=float)
@@ -149,7 +152,9 @@ def _rod_half(mech: Mechanism, q):
     return 0.5 * mech.rod_length * jnp.stack([jnp.cos(q[2]), jnp.sin(q[2])])
 
 
-def joint_points(mech: Mechanism, name: str, q, qd, t):
+def joint_points(
+    mech: Mechanism, name: str, q: Float[ArrayLike, " 4"], qd: Float[ArrayLike, " 4"], t: Float[ArrayLike, ""]
+) -> tuple[Float[Array, " 2"], Float[Array, " 2"], Float[Array, " 2"], Float[Array, " 2"]]:
     """(pin centre, pin velocity, hole centre, hole velocity) of joint ``name`` for full
     coordinates Q = (x2, y2, theta2, x3) and their rates, m and m/s. The hole is on the
     rod (its end B or C); the pin is the crank pin (B) or the slider pin (C)."""
@@ -162,7 +167,14 @@ def joint_points(mech: Mechanism, name: str, q, qd, t):
     return pin, jnp.stack([qd[3], jnp.zeros_like(qd[3])]), q[:2] + half, qd[:2] + half_dot
 
 
-def joint_accelerations(mech: Mechanism, name: str, q, qd, qdd, t):
+def joint_accelerations(
+    mech: Mechanism,
+    name: str,
+    q: Float[ArrayLike, " 4"],
+    qd: Float[ArrayLike, " 4"],
+    qdd: Float[ArrayLike, " 4"],
+    t: Float[ArrayLike, ""],
+) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
     """(pin acceleration, hole acceleration) of joint ``name``, m/s^2: the time
     derivatives of :func:`joint_points`' velocities (the crank turns at constant speed)."""
     half = _rod_half(mech, q)
@@ -172,7 +184,9 @@ def joint_accelerations(mech: Mechanism, name: str, q, qd, qdd, t):
     return jnp.stack([qdd[3], jnp.zeros_like(qdd[3])]), qdd[:2] + half_ddot
 
 
-def eccentricities(mech: Mechanism, t, y):
+def eccentricities(
+    mech: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]
+) -> tuple[Float[Array, "2 2"], Float[Array, "2 2"]]:
     """Pin-in-bearing state of a run with clearance at B and C: eccentricities
     d = pin centre - hole centre, shape (2, 2) for (B, C), m, and their rates, m/s."""
     if clearance_joints(mech) != ("B", "C"):
@@ -187,7 +201,13 @@ def eccentricities(mech: Mechanism, t, y):
     return jnp.stack(d), jnp.stack(dd)
 
 
-def state_from_eccentricities(mech: Mechanism, t, d, d_rate, rest):
+def state_from_eccentricities(
+    mech: Mechanism,
+    t: Float[ArrayLike, ""],
+    d: Float[ArrayLike, "2 2"],
+    d_rate: Float[ArrayLike, "2 2"],
+    rest: Float[ArrayLike, " aux"],
+) -> Float[Array, " state"]:
     """Inverse of :func:`eccentricities`: the scaled state whose pins sit at
     eccentricities ``d`` (2, 2) m moving at ``d_rate`` (2, 2) m/s in bearings B and
     C at time t; ``rest`` are the remaining state entries in SI units (approach-speed
@@ -213,7 +233,9 @@ def state_from_eccentricities(mech: Mechanism, t, d, d_rate, rest):
     return jnp.concatenate([s, sd, rest]) / state_scales(mech)
 
 
-def memory_target(eccentricity, relative_velocity, clearance):
+def memory_target(
+    eccentricity: Float[ArrayLike, " 2"], relative_velocity: Float[ArrayLike, " 2"], clearance: Float[ArrayLike, ""]
+) -> Float[Array, ""]:
     """The normal speed the approach-speed memory tracks, m/s.
 
     ``d . v / max(|d|, c/2)``: equal to delta_dot = n . v wherever an impact can
@@ -230,7 +252,7 @@ def memory_target(eccentricity, relative_velocity, clearance):
 _BLEND_BUMP = (340.0, -540.0)
 
 
-def freeze_coordinate(penetration, target, contact):
+def freeze_coordinate(penetration: Float[ArrayLike, ""], target: Float[ArrayLike, ""], contact) -> Float[Array, ""]:
     """Time to or from the wall at the current normal speed, in units of
     ``contact.freeze_time``: ``x = gap / (t_f sqrt(target^2 + v_min^2))`` with gap =
     -delta (m), t_f = ``freeze_time``, the memory target (the normal speed, m/s)
@@ -240,7 +262,7 @@ def freeze_coordinate(penetration, target, contact):
     return -penetration / (contact.freeze_time * speed)
 
 
-def memory_tracking(x):
+def memory_tracking(x: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
     """Weight w of the exact tracking term d(target)/dt in the approach-speed memory's
     rate, as a function of the :func:`freeze_coordinate` x.
 
@@ -261,7 +283,7 @@ def memory_tracking(x):
     return laws.smoothstep(x) + x**3 * (1.0 - x) ** 3 * (b1 + b2 * x)
 
 
-def memory_relaxation(x, contact):
+def memory_relaxation(x: Float[ArrayLike, ""], contact) -> Float[Array, ""]:
     """Rate, 1/s, at which the approach-speed memory relaxes onto its target:
     ``S(x - 1) (1 / memory_time + (1 - S(x t_f / reset_window - 1)) / reset_time)``
     for the :func:`freeze_coordinate` x (time to or from the wall in units of
@@ -289,7 +311,12 @@ def memory_relaxation(x, contact):
     return laws.smoothstep(x - 1.0) * (1.0 / c.memory_time + near / c.reset_time)
 
 
-def memory_target_rate(eccentricity, relative_velocity, relative_acceleration, clearance):
+def memory_target_rate(
+    eccentricity: Float[ArrayLike, " 2"],
+    relative_velocity: Float[ArrayLike, " 2"],
+    relative_acceleration: Float[ArrayLike, " 2"],
+    clearance: Float[ArrayLike, ""],
+) -> Float[Array, ""]:
     """Time derivative of :func:`memory_target` along the motion, m/s^2.
 
     With m = max(|d|, c/2): ``(v.v + d.a) / m - (d.v) m' / m^2``, where
@@ -334,13 +361,13 @@ def joint_contact(
     joint: Joint,
     pin_material: Material,
     hole_material: Material,
-    pin_pos,
-    pin_vel,
-    pin_omega,
-    hole_pos,
-    hole_vel,
-    hole_omega,
-    memory,
+    pin_pos: Float[ArrayLike, " 2"],
+    pin_vel: Float[ArrayLike, " 2"],
+    pin_omega: Float[ArrayLike, ""],
+    hole_pos: Float[ArrayLike, " 2"],
+    hole_vel: Float[ArrayLike, " 2"],
+    hole_omega: Float[ArrayLike, ""],
+    memory: Float[ArrayLike, ""],
 ) -> JointContact:
     """Kinematics and forces of one clearance joint (model.md, paper Eq. 1-13).
 
@@ -436,7 +463,7 @@ class Dynamics(NamedTuple):
     state_rate: jax.Array
 
 
-def dynamics(mech: Mechanism, t, y) -> Dynamics:
+def dynamics(mech: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Dynamics:
     """The equations of motion at time t (s) for scaled state y: only what dy/dt
     needs (:func:`evaluate` adds the output-only quantities)."""
     n = n_dof(mech)
@@ -536,7 +563,7 @@ def dynamics(mech: Mechanism, t, y) -> Dynamics:
     return Dynamics(q, qd, qdd, contacts, react_b, react_c, moment, rate)
 
 
-def evaluate(mech: Mechanism, t, y) -> Frame:
+def evaluate(mech: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Frame:
     """All physical quantities at time t (s) for scaled state y; also dy/dt."""
     t = jnp.asarray(t, dtype=float)
     dyn = dynamics(mech, t, y)
@@ -587,7 +614,7 @@ def evaluate(mech: Mechanism, t, y) -> Frame:
 
 
 @jax.jit
-def vector_field(t, y, mech: Mechanism):
+def vector_field(t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"], mech: Mechanism) -> Float[Array, " state"]:
     """dy/dt of the scaled state ``y`` (shape (state_size,)) at time ``t`` (s), for
     diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=mech``.
 
@@ -597,6 +624,6 @@ def vector_field(t, y, mech: Mechanism):
     return dynamics(mech, t, y).state_rate
 
 
-def initial_state(mech: Mechanism):
+def initial_state(mech: Mechanism) -> Float[Array, " state"]:
     """Pins centred and moving with the ideal mechanism; memories and work zero."""
     return jnp.zeros(state_size(mech))

@@ -13,6 +13,7 @@ import math
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 from . import ideal, model
 from .metrics import DEG, headline, transmission_angle_deviation
@@ -81,7 +82,7 @@ def frames(sim: Simulation) -> model.Frame:
     return _frames(sim.mechanism, sim.ts, sim.ys)
 
 
-def trajectory(sim: Simulation) -> dict[str, np.ndarray]:
+def trajectory(sim: Simulation) -> dict[str, Float[np.ndarray, " n"]]:
     """Named output columns (units in :data:`COLUMNS`; SI, angles in degrees)."""
     f = frames(sim)
     cols = {
@@ -132,7 +133,7 @@ def trajectory(sim: Simulation) -> dict[str, np.ndarray]:
     return {k: np.asarray(cols[k]) for k in COLUMNS}
 
 
-def transmission_angle_error(mech, ts, ys):
+def transmission_angle_error(mech, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, " n"]:
     """Actual minus ideal transmission angle at sample times ``ts`` (s) with scaled
     states ``ys``, degrees; compared at the same time, i.e. the same crank angle."""
 
@@ -142,7 +143,7 @@ def transmission_angle_error(mech, ts, ys):
     return jax.vmap(one)(ts, ys)
 
 
-def rms_transmission_error(sim: Simulation, t_start=None):
+def rms_transmission_error(sim: Simulation, t_start: Float[ArrayLike, ""] | None = None) -> Float[Array, ""]:
     """RMS of (actual - ideal) transmission angle over samples with t > t_start,
     degrees (paper Eq. 19; samples are at equal crank-angle steps when ``ts`` is
     equally spaced). Differentiable. Default ``t_start``: one crank revolution."""
@@ -170,7 +171,7 @@ def summary_metrics(sim: Simulation) -> dict[str, float]:
     return {k: float(v) for k, v in sim.metrics.items()}
 
 
-def sample_metrics(sim: Simulation, t_start) -> dict[str, float]:
+def sample_metrics(sim: Simulation, t_start: Float[ArrayLike, ""]) -> dict[str, float]:
     """The headline metrics (:data:`jaxcrank.metrics.METRICS`) over the stored
     samples of ``sim`` with ``t > t_start`` (s), as Python floats: the peaks are
     maxima over the samples, not over the solve (for solves that were not tracked,
@@ -188,7 +189,7 @@ def sample_metrics(sim: Simulation, t_start) -> dict[str, float]:
     return {k: float(v) for k, v in _headline(f, t_start).items()}
 
 
-def energy_balance(cols: dict[str, np.ndarray], i0=0, i1=-1) -> dict[str, float]:
+def energy_balance(cols: dict[str, Float[np.ndarray, " n"]], i0: int = 0, i1: int = -1) -> dict[str, float]:
     """Work-energy balance between samples i0 and i1, J.
 
     ``residual = delta(kinetic + potential + contact) - (driver work - dissipated work)``.
@@ -205,7 +206,7 @@ def energy_balance(cols: dict[str, np.ndarray], i0=0, i1=-1) -> dict[str, float]
     }
 
 
-def deviation_bounds(mech, max_penetration) -> dict[str, float]:
+def deviation_bounds(mech, max_penetration: Float[ArrayLike, ""]) -> dict[str, float]:
     """Largest |x deviation| of slider and rod centre that the loop closure allows, m.
 
     Args:

@@ -20,6 +20,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+from jaxtyping import Float
 
 from .params import Mechanism, ParameterError, get_parameter
 
@@ -34,13 +35,15 @@ def _ranges(ranges: Mapping[str, Sequence[float]]):
     return names, lo, hi
 
 
-def full_factorial(levels: Mapping[str, Sequence[float]]):
+def full_factorial(levels: Mapping[str, Sequence[float]]) -> tuple[list[str], Float[np.ndarray, "designs params"]]:
     """Every combination of the given levels: ``(names, designs (N, k))``, SI."""
     names = list(levels)
     return names, np.array(list(itertools.product(*[np.asarray(levels[n], float) for n in names])), float)
 
 
-def latin_hypercube(ranges: Mapping[str, Sequence[float]], n: int, seed: int = 0):
+def latin_hypercube(
+    ranges: Mapping[str, Sequence[float]], n: int, seed: int = 0
+) -> tuple[list[str], Float[np.ndarray, "designs params"]]:
     """``n`` Latin-hypercube samples in the box ``ranges`` (name -> (lower, upper)):
     each variable's range is cut into ``n`` equal strata, each used once."""
     names, lo, hi = _ranges(ranges)
@@ -49,13 +52,17 @@ def latin_hypercube(ranges: Mapping[str, Sequence[float]], n: int, seed: int = 0
     return names, lo + u * (hi - lo)
 
 
-def random_uniform(ranges: Mapping[str, Sequence[float]], n: int, seed: int = 0):
+def random_uniform(
+    ranges: Mapping[str, Sequence[float]], n: int, seed: int = 0
+) -> tuple[list[str], Float[np.ndarray, "designs params"]]:
     """``n`` independent uniform samples in the box ``ranges``."""
     names, lo, hi = _ranges(ranges)
     return names, lo + np.random.default_rng(seed).random((n, len(names))) * (hi - lo)
 
 
-def one_at_a_time(base: Mechanism, ranges: Mapping[str, Sequence[float]], points: int = 11):
+def one_at_a_time(
+    base: Mechanism, ranges: Mapping[str, Sequence[float]], points: int = 11
+) -> tuple[list[str], Float[np.ndarray, "designs params"]]:
     """One line per variable through ``base``: ``points`` equally spaced values of
     that variable over its range, the others at their ``base`` values."""
     names, lo, hi = _ranges(ranges)
@@ -92,12 +99,14 @@ class Tolerance:
         """Standard deviation, SI."""
         return self.tolerance / 3.0 if self.distribution == "normal" else self.tolerance / math.sqrt(3.0)
 
-    def standard(self, rng, n):
+    def standard(self, rng: np.random.Generator, n: int) -> Float[np.ndarray, " n"]:
         """``n`` draws of the standardised variable (band = [-1, 1] for uniform, 3 sigma = 1 for normal)."""
         return rng.uniform(-1.0, 1.0, n) if self.distribution == "uniform" else rng.standard_normal(n) / 3.0
 
 
-def monte_carlo(tolerances: Mapping[str, Tolerance], n: int, seed: int = 0):
+def monte_carlo(
+    tolerances: Mapping[str, Tolerance], n: int, seed: int = 0
+) -> tuple[list[str], Float[np.ndarray, "designs params"]]:
     """``n`` manufactured parts: every parameter drawn from its :class:`Tolerance`."""
     rng = np.random.default_rng(seed)
     names = list(tolerances)

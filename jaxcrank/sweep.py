@@ -66,6 +66,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
+from jaxtyping import Array, ArrayLike, Float, Int, Shaped
 from tqdm.auto import tqdm
 
 from . import config
@@ -133,16 +134,18 @@ class Settings:
         """Number of output samples, the start included."""
         return int(round(self.revolutions * self.samples_per_revolution)) + 1
 
-    def sample_times(self, mech: Mechanism):
+    def sample_times(self, mech: Mechanism) -> Float[Array, " samples"]:
         """The output sample times of ``mech``'s run, s (traceable in the crank speed)."""
         return jnp.linspace(0.0, self.revolutions, self.n_samples) * mech.period
 
-    def metrics_start(self, mech: Mechanism):
+    def metrics_start(self, mech: Mechanism) -> Float[ArrayLike, ""]:
         """Start of the metrics window, s: the metrics cover samples with t > this."""
         return self.metrics_from_revolution * mech.period
 
 
-def simulate_design(base: Mechanism, names: Sequence[str], x, settings: Settings = Settings()):
+def simulate_design(
+    base: Mechanism, names: Sequence[str], x: Float[ArrayLike, " params"], settings: Settings = Settings()
+) -> tuple[dict[str, Float[Array, ""]], Int[Array, ""], Int[Array, ""]]:
     """One design: ``base`` with ``names`` set to ``x`` (SI), simulated with
     ``throw=False``. Returns (metrics dict, status code (index into
     :data:`STATUSES`), accepted steps). Traceable; :func:`run` vmaps it."""
@@ -302,7 +305,7 @@ def columns(names: Sequence[str]) -> list[str]:
     return ["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + ["status", "message"] + list(METRICS) + ["steps"]
 
 
-def read_table(path) -> dict[str, np.ndarray]:
+def read_table(path) -> dict[str, Shaped[np.ndarray, " rows"]]:
     """A sweep table (CSV) as columns: numbers as float arrays (empty cells NaN),
     ``status`` and ``message`` as string arrays; rows sorted by ``index``.
 
@@ -365,7 +368,7 @@ def _table(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
 def run(
     base: Mechanism,
     names: Sequence[str],
-    designs,
+    designs: Float[ArrayLike, "designs params"],
     settings: Settings = Settings(),
     *,
     out=None,
@@ -373,7 +376,7 @@ def run(
     chunk: int | None = None,
     workers: int = 1,
     progress: bool = True,
-) -> dict[str, np.ndarray]:
+) -> dict[str, Shaped[np.ndarray, " designs"]]:
     """Simulate every design and return the table (as :func:`read_table`).
 
     Args:
@@ -568,7 +571,9 @@ def _worker_solve(xs):
     return _evaluate(_WORKER["base"], _WORKER["names"], _WORKER["settings"], xs)
 
 
-def run_in_workers(base, names, settings, chunks, workers, record):
+def run_in_workers(
+    base, names, settings, chunks: Sequence[tuple[Sequence[int], Float[np.ndarray, "chunk params"]]], workers, record
+):
     """Solve ``chunks`` in ``workers`` spawned processes, at most two chunks queued per
     worker, and ``record`` each as it finishes (the table is sorted when read)."""
     ctx = multiprocessing.get_context("spawn")  # a forked JAX runtime is not safe
@@ -586,7 +591,7 @@ def run_in_workers(base, names, settings, chunks, workers, record):
                     pending[pool.submit(_worker_solve, xs)] = idx
 
 
-def summarize(table: Mapping[str, np.ndarray], quantiles=(0.05, 0.5, 0.95)) -> dict:
+def summarize(table: Mapping[str, Shaped[np.ndarray, " designs"]], quantiles=(0.05, 0.5, 0.95)) -> dict:
     """Per metric over the ``ok`` designs: mean, std, min, max and quantiles; and
     the count of each status. Units as in the metric names."""
     ok = np.asarray(table["status"]) == "ok"

@@ -45,11 +45,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int, Real
 
 from jaxcrank import laws, model
 from jaxcrank.outputs import transmission_angle_error
 from jaxcrank.params import Mechanism, ParameterError
-from jaxcrank.solve import simulate
+from jaxcrank.solve import Simulation, simulate
 
 
 class Objective(eqx.Module):
@@ -146,7 +147,7 @@ class Objective(eqx.Module):
         return n_start, n_eval, n_window, dt
 
 
-def eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid):
+def eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid) -> tuple[Simulation, int, Float[Array, " eval"]]:
     """One solve from the pins-centred start over the objective's sample ``grid``
     (:meth:`Objective.grid`, computed by the caller while the crank speed is still
     concrete): the simulation, the sample index of t_start and the
@@ -157,7 +158,7 @@ def eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid):
     return sim, n_start, transmission_angle_error(mech, sim.ts[n_start + 1 :], sim.ys[n_start + 1 :])
 
 
-def pathwise_errors(mech: Mechanism, obj: Objective = Objective()):
+def pathwise_errors(mech: Mechanism, obj: Objective = Objective()) -> tuple[Float[Array, " eval"], Bool[Array, ""]]:
     """Squared transmission-angle errors (deg^2) at the samples in (t_start, t_end]
     of one solve from the pins-centred start, and whether the solve succeeded
     (``throw=False``: batch callers report failures)."""
@@ -165,7 +166,7 @@ def pathwise_errors(mech: Mechanism, obj: Objective = Objective()):
     return err**2, sim.ok & jnp.all(jnp.isfinite(err))
 
 
-def pathwise(mech: Mechanism, obj: Objective = Objective()):
+def pathwise(mech: Mechanism, obj: Objective = Objective()) -> Float[Array, ""]:
     """Eq. 19 from one solve from the pins-centred start, degrees (if the solve fails:
     raises, or NaN with ``obj.on_failure = "nan"``)."""
     sim, _, err = eval_samples(mech, obj, obj.on_failure == "raise", obj.grid(mech))
@@ -192,7 +193,7 @@ class Starts(NamedTuple):
     clearance: jax.Array
 
 
-def reference(mech: Mechanism, obj: Objective = Objective()):
+def reference(mech: Mechanism, obj: Objective = Objective()) -> tuple[Float[Array, ""], Starts]:
     """One forward solve from the pins-centred start (no gradient): the Eq. 19
     value (degrees) and the :class:`Starts` of the ensemble windows."""
     grid = obj.grid(mech)
@@ -202,7 +203,7 @@ def reference(mech: Mechanism, obj: Objective = Objective()):
     return jax.lax.stop_gradient(exact), window_starts(sim, n_start, grid, obj)
 
 
-def window_starts(sim, n_start: int, grid, obj: Objective) -> Starts:
+def window_starts(sim: Simulation, n_start: int, grid, obj: Objective) -> Starts:
     """The :class:`Starts` of the ensemble windows of ``obj`` taken from a solve
     ``sim`` over the objective's sample ``grid`` (no gradient)."""
     _, n_eval, n_window, _ = grid
@@ -217,7 +218,7 @@ def window_starts(sim, n_start: int, grid, obj: Objective) -> Starts:
     return jax.lax.stop_gradient(Starts(t0s, d, d_rate, rest, clearance))
 
 
-def start_state(mech: Mechanism, starts: Starts, i):
+def start_state(mech: Mechanism, starts: Starts, i: Int[ArrayLike, ""]) -> Float[Array, " state"]:
     """Scaled state of ``mech`` at window ``i``: the pins where ``starts`` had them
     in their bearings, moving the same way, with the same gap or penetration (a
     clearance change moves the pin radially by the change)."""
@@ -233,7 +234,9 @@ def _is_float(x):
     return isinstance(x, float) or (isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.inexact))
 
 
-def solve_window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: Objective):
+def solve_window(
+    mech: Mechanism, starts: Starts, i: Int[ArrayLike, ""], n_window: int, dt: float, obj: Objective
+) -> tuple[Float[Array, " window"], Float[Array, "window state"], Bool[Array, ""]]:
     """Window ``i`` re-solved for ``mech`` from :func:`start_state`: its sample
     times (n_window,) s, scaled states (zero where the solve failed, so a failed
     window is reported by the caller, not propagated as NaN) and whether it finished."""
@@ -265,7 +268,9 @@ def _window(mech: Mechanism, starts: Starts, i, n_window: int, dt: float, obj: O
     return jnp.where(ok, sq, 0.0), ok
 
 
-def window_gradients(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
+def window_gradients(
+    mech: Mechanism, starts: Starts, obj: Objective = Objective()
+) -> tuple[Float[Array, " windows"], Bool[Array, " windows"], Mechanism]:
     """Each window's sum of squared transmission-angle errors (deg^2), shape (K,),
     whether its solve succeeded (K,), and its gradient with respect to every
     parameter of ``mech`` (a Mechanism of (K,) arrays), each window re-solved from
@@ -290,7 +295,7 @@ WINDOWS_FAILED = (
 )
 
 
-def windows_ok(ok, obj: Objective):
+def windows_ok(ok: Bool[Array, " windows"], obj: Objective) -> Real[Array, ""]:
     """The number of finished windows (a scalar); fewer than half of ``ok`` raises
     (``obj.on_failure = "raise"``) or makes it NaN (``"nan"``)."""
     n_ok = jnp.sum(ok)
@@ -308,7 +313,7 @@ def over_windows(fun, starts: Starts):
     return jax.lax.map(fun, jnp.arange(starts.t.shape[0]))
 
 
-def ensemble(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
+def ensemble(mech: Mechanism, starts: Starts, obj: Objective = Objective()) -> Float[Array, ""]:
     """Eq. 19 pooled over the ensemble windows re-solved for ``mech`` from the fixed
     ``starts``, degrees. Its derivative (forward or reverse mode, as
     ``obj.window_gradient``) is the ensemble sum of the windows' derivatives.
@@ -322,7 +327,7 @@ def ensemble(mech: Mechanism, starts: Starts, obj: Objective = Objective()):
     return jnp.sqrt(jnp.sum(jnp.where(ok, sq, 0.0)) / (n_window * n_ok))
 
 
-def value(mech: Mechanism, obj: Objective = Objective()):
+def value(mech: Mechanism, obj: Objective = Objective()) -> Float[Array, ""]:
     """Eq. 19 value, degrees. With ``method="pathwise"`` its gradient is the exact
     derivative of the discrete solve; with ``"ensemble"`` the value is still the
     exact Eq. 19 (from :func:`reference`) and the gradient is the ensemble

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
 from jaxcrank.sampling import Tolerance, monte_carlo
@@ -134,16 +135,16 @@ class Problem:
         return len(self.names)
 
     @property
-    def span(self):
+    def span(self) -> Float[Array, " n"]:
         return jnp.asarray(self.upper) - jnp.asarray(self.lower)
 
-    def to_unit(self, x):
+    def to_unit(self, x: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
         return (jnp.asarray(x, dtype=float) - jnp.asarray(self.lower)) / self.span
 
-    def from_unit(self, u):
+    def from_unit(self, u: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
         return jnp.asarray(self.lower) + jnp.asarray(u, dtype=float) * self.span
 
-    def feasible(self, x, tol=1e-12):
+    def feasible(self, x: Float[ArrayLike, "*designs n"], tol=1e-12) -> Bool[ArrayLike, "*designs"]:
         """Whether the SI design ``x`` satisfies bounds and constraints (numpy bool, batched)."""
         x = np.asarray(x, dtype=float)
         ok = np.all((x >= np.asarray(self.lower) - tol) & (x <= np.asarray(self.upper) + tol), axis=-1)
@@ -151,7 +152,7 @@ class Problem:
             ok &= x @ np.asarray(row) <= bound + tol
         return ok
 
-    def project(self, u, iterations: int = 100):
+    def project(self, u: Float[ArrayLike, " n"], iterations: int = 100) -> Float[Array, " n"]:
         """Euclidean projection of the scaled design ``u`` onto the scaled feasible set."""
         u = jnp.asarray(u, dtype=float)
         box = lambda v: optax.projections.projection_box(v, 0.0, 1.0)  # noqa: E731
@@ -173,17 +174,17 @@ class Problem:
         (v, _), _ = jax.lax.scan(sweep, (u, tuple(jnp.zeros_like(u) for _ in sets)), None, length=iterations)
         return v
 
-    def start_unit(self):
+    def start_unit(self) -> Float[Array, " n"]:
         """Scaled, projected start design."""
         x0 = self.start if self.start is not None else [get_parameter(self.base, nm) for nm in self.names]
         return self.project(self.to_unit(x0))
 
     # ------------------------------------------------------------------ model
-    def mechanism(self, x) -> Mechanism:
+    def mechanism(self, x: Float[ArrayLike, " n"]) -> Mechanism:
         """The mechanism at SI design ``x`` (traceable)."""
         return set_parameters(self.base, self.names, x)
 
-    def draws(self) -> np.ndarray:
+    def draws(self) -> Float[np.ndarray, "samples scatter"]:
         """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI:
         the Monte Carlo draws of :func:`jaxcrank.sampling.monte_carlo` about a zero nominal."""
         if not self.scatter:
@@ -191,7 +192,7 @@ class Problem:
         tolerances = {name: Tolerance(0.0, tol, dist) for name, tol, dist in self.scatter}
         return monte_carlo(tolerances, self.samples, seed=self.seed)[1]
 
-    def part(self, x, deviation) -> Mechanism:
+    def part(self, x: Float[ArrayLike, " n"], deviation: Float[ArrayLike, " scatter"]) -> Mechanism:
         """The manufactured part of SI design ``x`` with ``deviation`` (one row of
         :meth:`draws`): each scattered parameter at its design (or base) value plus
         its deviation (traceable)."""
@@ -199,20 +200,20 @@ class Problem:
         names = [nm for nm, _, _ in self.scatter]
         return set_parameters(mech, names, [parameter_value(mech, nm) + deviation[j] for j, nm in enumerate(names)])
 
-    def cost(self, x):
+    def cost(self, x: Float[ArrayLike, " n"]) -> Float[Array, ""]:
         """Manufacturing cost term, degrees: ``cost_weight * sum_j cost_reference / c_j``
         over the clearance variables (reciprocal cost-tolerance model: halving a
         clearance doubles its machining cost)."""
         terms = [self.cost_reference / x[i] for i, nm in enumerate(self.names) if nm.startswith("clearance_")]
         return self.cost_weight * sum(terms) if terms else jnp.zeros(())
 
-    def value_and_grad(self, x):
+    def value_and_grad(self, x: Float[ArrayLike, " n"]) -> tuple[Float[Array, ""], Float[Array, " n"]]:
         """The objective (degrees) at SI design ``x`` (n,) and its gradient (n,), degrees
         per SI unit, by forward or reverse mode as the objective's settings say
         (:func:`optim.objective.forward_mode`). Traceable; ``jax.jit`` it."""
         return value_and_grad(self.objective_value, forward_mode(self.objective))(x)
 
-    def objective_value(self, x, method: str | None = None):
+    def objective_value(self, x: Float[ArrayLike, " n"], method: str | None = None) -> Float[Array, ""]:
         """Total objective at SI design ``x``: Eq. 19 (degrees) + cost. Differentiate it
         with :meth:`value_and_grad` (the default ensemble windows are forward-mode)."""
         obj = self.objective if method is None else dataclasses.replace(self.objective, method=method)

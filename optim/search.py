@@ -18,6 +18,7 @@ import itertools
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Bool, Float
 from tqdm.auto import tqdm
 
 from jaxcrank.params import ParameterError
@@ -42,7 +43,9 @@ def _batch(problem: Problem, xs):
     return jax.vmap(one)(xs)
 
 
-def evaluate(problem: Problem, xs, chunk: int = 16, progress: bool = True):
+def evaluate(
+    problem: Problem, xs: Float[ArrayLike, "designs n"], chunk: int = 16, progress: bool = True
+) -> tuple[Float[np.ndarray, " designs"], Bool[np.ndarray, " designs"]]:
     """Objective (degrees, incl. cost) and status at SI designs ``xs`` (N, n).
 
     Returns ``(values, ok)``: ``values[i]`` is NaN exactly where ``ok[i]`` is False
@@ -59,7 +62,9 @@ def _with_cost(problem: Problem, xs, errors, ok):
     return np.where(ok, errors + cost, np.nan)
 
 
-def rms_errors(problem: Problem, xs, chunk: int = 16, progress: bool = True):
+def rms_errors(
+    problem: Problem, xs: Float[ArrayLike, "designs n"], chunk: int = 16, progress: bool = True
+) -> tuple[Float[np.ndarray, " designs"], Bool[np.ndarray, " designs"]]:
     """Eq. 19 values (degrees, without the cost term) and status at SI designs ``xs``."""
     xs = np.atleast_2d(np.asarray(xs, dtype=float))
     values, oks = [], []
@@ -94,12 +99,18 @@ class Grid:
     best_value: float
 
 
-def grid_axes(problem: Problem, n: int):
+def grid_axes(problem: Problem, n: int) -> tuple[Float[np.ndarray, " points"], ...]:
     """The ``n`` points per axis of the grid over the box, SI."""
     return tuple(np.linspace(lo, hi, n) for lo, hi in zip(problem.lower, problem.upper))
 
 
-def grid_search(problem: Problem, n: int = 21, chunk: int = 21, progress: bool = True, errors=None) -> Grid:
+def grid_search(
+    problem: Problem,
+    n: int = 21,
+    chunk: int = 21,
+    progress: bool = True,
+    errors: Float[ArrayLike, "points points"] | None = None,
+) -> Grid:
     """Evaluate an ``n`` x ``n`` grid over the box of a two-variable problem.
 
     ``errors``: the (n, n) Eq. 19 values of the same grid from an earlier run of
@@ -158,7 +169,7 @@ def write_grid(path, problem: Problem, grid: Grid):
             )
 
 
-def read_grid(path, problem: Problem, n: int):
+def read_grid(path, problem: Problem, n: int) -> Float[np.ndarray, "points points"]:
     """The (n, n) Eq. 19 errors of a ``grid.csv`` written by :func:`write_grid` for
     the same variables and box (checked); NaN where infeasible or failed."""
     import csv

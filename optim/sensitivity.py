@@ -30,10 +30,11 @@ from collections.abc import Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from jaxcrank import metrics, model
 from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
-from jaxcrank.solve import simulate
+from jaxcrank.solve import Simulation, simulate
 
 from .objective import Objective, forward_mode, solve_window, window_starts
 
@@ -58,19 +59,29 @@ PARAMETERS = (
 )
 
 
-def deviations(mech: Mechanism, ts, ys):
+def deviations(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, "n 4"]:
     """Per-sample deviations from the ideal mechanism behind :data:`METRICS`, shape
     (n, 4), in that order and in their units (deg, m, m, N m)."""
     return jax.vmap(lambda t, y: metrics.rms_signals(model.evaluate(mech, t, y)))(ts, ys)
 
 
-def metric_values(sim):
+def metric_values(sim: Simulation) -> Float[Array, " 4"]:
     """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
     :mod:`jaxcrank.tracking`), shape (4,), in their units."""
     return jnp.stack([sim.metrics[k] for k in METRICS])
 
 
-def window_sums(base: Mechanism, names, x, starts, i, n_window: int, dt: float, obj: Objective, metrics=deviations):
+def window_sums(
+    base: Mechanism,
+    names,
+    x: Float[ArrayLike, " params"],
+    starts,
+    i: Int[ArrayLike, ""],
+    n_window: int,
+    dt: float,
+    obj: Objective,
+    metrics=deviations,
+) -> tuple[Float[Array, " metrics"], Bool[Array, ""]]:
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
     carried-over start state: the sums of squared deviations over its samples,
     shape (4,), in the units of :data:`METRICS` squared, and whether it finished.
