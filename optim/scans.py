@@ -1,8 +1,8 @@
 """1-D scans of the Eq. 19 objective along each design variable, and the
 gradients measured against them (issue 3's evidence for the gradient formulation).
 
-    python -m optim.scans --out runs/scans            # paper problem, ~10 min on 2 cores
-    python -m optim.scans --out runs/scans --quick    # short window, coarse, ~2 min
+    python -m optim.scans --out runs/scans            # paper problem (minutes)
+    python -m optim.scans --out runs/scans --quick    # short window, coarse
 
 Per variable, through the start design (other variables fixed):
 - ``coarse``: ``--points`` designs across the whole box;
