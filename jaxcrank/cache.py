@@ -23,6 +23,7 @@ import hashlib
 import importlib.metadata
 import os
 import pickle
+import warnings
 from pathlib import Path
 
 import jax
@@ -158,10 +159,13 @@ def exported(fun, key, *args):
             # cache. Such a program cannot be stored; it runs uncached.
             return _under_checks_as_nan(jax.jit(fun))
     blob = program.serialize()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_bytes(blob)
-    tmp.replace(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(blob)
+        tmp.replace(path)
+    except OSError as err:  # an unwritable or full cache folder costs the next run a trace, not this run
+        warnings.warn(f"jaxcrank: could not store the traced program in {path.parent} ({err})", stacklevel=2)
     # the program as a later process reads it back, so both compile the same module
     return jax.jit(jax_export.deserialize(bytearray(blob)).call)
 

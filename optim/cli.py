@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 import time
 import tomllib
 from pathlib import Path
@@ -189,7 +190,12 @@ def run(args) -> int:
     cfg = _settings(args)
     problem, settings = build(cfg)
     if not args.no_cache:
-        cache.enable(args.cache_dir)
+        try:
+            cache.enable(args.cache_dir)
+        except OSError as err:  # the run goes on, compiling as without a cache
+            print(
+                f"jaxcrank optimize: no compilation cache ({err}); pass --cache-dir DIR or --no-cache", file=sys.stderr
+            )
     # read a reused landscape before the optimisation, so a bad file fails at once
     reused = (
         search.read_grid(args.grid_from, problem, args.grid)

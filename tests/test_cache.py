@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from jaxcrank import cache
 
@@ -26,6 +27,7 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 events = []
 jax.monitoring.register_event_listener(lambda name, **kw: events.append(name))
 import numpy as np
+import pytest
 from optim.objective import Objective
 from optim.optimize import programs
 from optim.problem import Problem, paper_problem
@@ -84,3 +86,35 @@ def test_enable_makes_and_names_the_folder_it_uses(tmp_path):
     finally:
         jax.config.update("jax_compilation_cache_dir", before)
         cache._folder = None
+
+
+def test_a_stored_program_is_read_back_and_a_damaged_one_replaced(tmp_path, monkeypatch):
+    import jax
+    import jax.numpy as jnp
+
+    monkeypatch.setattr(cache, "_folder", tmp_path)
+    spec = jax.ShapeDtypeStruct((3,), jnp.float64)
+    x = np.arange(3.0)
+    first = cache.exported(lambda v: jnp.sin(v) * 2.0, "test.sin", spec)
+    (stored,) = (tmp_path / "exported").glob("*.bin")
+    again = cache.exported(lambda v: v, "test.sin", spec)  # same key: the stored program, not this function
+    np.testing.assert_array_equal(again(x), first(x))
+    np.testing.assert_array_equal(again(x), np.sin(x) * 2.0)
+    stored.write_bytes(b"damaged")
+    replaced = cache.exported(lambda v: jnp.sin(v) * 2.0, "test.sin", spec)
+    np.testing.assert_array_equal(replaced(x), np.sin(x) * 2.0)
+    assert stored.read_bytes() != b"damaged"
+
+
+def test_an_unwritable_cache_folder_warns_and_the_program_still_runs(tmp_path, monkeypatch):
+    import jax
+    import jax.numpy as jnp
+
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("a file where the cache folder would be")
+    monkeypatch.setattr(cache, "_folder", blocker)
+    with pytest.warns(UserWarning, match="could not store"):
+        f = cache.exported(lambda v: v + 1.0, "test.plus", jax.ShapeDtypeStruct((2,), jnp.float64))
+    np.testing.assert_array_equal(f(np.zeros(2)), np.ones(2))
+    with pytest.raises(OSError):
+        cache.enable(blocker / "xla")
