@@ -50,7 +50,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, Real
 from jaxcrank import laws, model
 from jaxcrank.outputs import transmission_angle_error
 from jaxcrank.params import Mechanism, ParameterError
-from jaxcrank.solve import Simulation, simulate
+from jaxcrank.solve import DEFAULTS, Simulation, simulate
 
 
 class Objective(eqx.Module):
@@ -84,8 +84,8 @@ class Objective(eqx.Module):
             or ``"nan"`` (the value is NaN instead, and the program holds no host
             callback, so JAX's persistent compilation cache can store it; the caller
             must check, as :func:`optim.optimize.optimize` does).
-        rtol, atol: solver tolerances on the scaled state.
-        max_steps: step budget of the long solve.
+        rtol, atol: solver tolerances on the scaled state (default: :data:`jaxcrank.solve.DEFAULTS`).
+        max_steps: step budget of the long solve (default: :data:`jaxcrank.solve.DEFAULTS`).
     """
 
     t_start: float = eqx.field(static=True, default=0.1)
@@ -98,9 +98,9 @@ class Objective(eqx.Module):
     window_solver: str = eqx.field(static=True, default="rodas4")
     window_gradient: Literal["forward", "reverse"] = eqx.field(static=True, default="forward")
     on_failure: Literal["raise", "nan"] = eqx.field(static=True, default="raise")
-    rtol: float = eqx.field(static=True, default=1e-6)
-    atol: float = eqx.field(static=True, default=1e-6)
-    max_steps: int = eqx.field(static=True, default=500_000)
+    rtol: float = eqx.field(static=True, default=DEFAULTS.rtol)
+    atol: float = eqx.field(static=True, default=DEFAULTS.atol)
+    max_steps: int = eqx.field(static=True, default=DEFAULTS.max_steps)
 
     def __check_init__(self):
         if not 0.0 <= self.t_start < self.t_end:
