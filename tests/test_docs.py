@@ -48,6 +48,8 @@ def test_readme_is_short_and_gives_the_ci_test_command():
     ci = (ROOT / ".ci" / "run").read_text()
     assert "\npython -m pytest\n" in ci and "\npython -m pytest\n" in readme
     assert "jaxcrank simulate --out runs/paper" in readme
-    assert "python -m pytest -m slow" in readme
+    slow = 'python -m pytest -m "slow and not long"'
+    assert slow in readme and slow in ci  # CI runs the slow tests that are not long
+    assert "python -m pytest -m long" in readme
     for link in re.findall(r"\]\(((?:docs|notebooks)/[^)#]+)", readme):
         assert (ROOT / link).exists(), link

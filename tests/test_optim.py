@@ -105,7 +105,7 @@ def _estimator_matches_central_differences(obj):
         assert abs(g[i] - fd) <= 1e-4 * abs(fd), (ESTIMATOR_NAMES[i], g[i], fd)
 
 
-@pytest.mark.parametrize("mode", ["forward", "reverse"])
+@pytest.mark.parametrize("mode", ["forward", pytest.param("reverse", marks=pytest.mark.slow)])
 def test_ensemble_gradient_is_the_derivative_of_the_windows_with_starts_fixed(mode):
     """The estimator's AD (start-state carry-over, per-window derivatives, assembly)
     against central differences of the same function, starts held fixed."""
@@ -116,6 +116,7 @@ def test_ensemble_gradient_is_the_derivative_of_the_windows_with_starts_fixed(mo
     )
 
 
+@pytest.mark.slow  # three derivative programs of the windows (about 50 s)
 def test_a_window_over_its_step_budget_is_left_out_not_nan():
     """Window 0 of this objective needs 345 tsit5 steps, window 1 needs 167: with a
     budget of 250 the first is left out, and value and gradient are window 1's alone
@@ -264,6 +265,7 @@ def test_bad_problems_raise(kwargs, match):
         Problem(base=paper(), **kwargs)
 
 
+@pytest.mark.slow  # eight parts, value and gradient against central differences (about 40 s)
 def test_robust_objective_is_the_parts_mean_with_a_verified_gradient():
     """Sample-average of Eq. 19 over manufactured parts (common random numbers): value
     = mean of the parts' values, gradient = central differences of that mean (short,
