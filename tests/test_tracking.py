@@ -54,6 +54,7 @@ def test_tracking_needs_equally_spaced_samples():
         jc.simulate(jc.paper(), ts=jnp.array([0.0, 1e-4, 3e-4]), metrics_start=0.0)
 
 
+@pytest.mark.slow  # compiles sweep programs for several batch sizes (about 25 s)
 def test_chunk_that_fits_and_the_error_for_one_that_does_not():
     """The memory arithmetic of GPU sweeps, on this machine's XLA plan: a batch's bytes
     grow linearly with its size, the chunk that fits a budget fits it, and a chunk that
