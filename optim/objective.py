@@ -28,10 +28,10 @@ Two ways to evaluate it (``Objective.method``):
 
 The windows are differentiated in forward mode by default
 (``Objective.window_gradient = "forward"``: ``diffrax.ForwardMode``, one tangent per
-design variable), which compiles in about half the time of reverse mode for the
-few variables of a design problem. Such an objective is differentiated with
-:func:`value_and_grad` (``jax.jacfwd``), not ``jax.grad``; ``"reverse"`` restores
-reverse mode.
+design variable), which compiles several times faster than reverse mode for the
+few variables of a design problem (and runs slower per gradient; docs/optimisation.md).
+Such an objective is differentiated with :func:`value_and_grad` (``jax.jacfwd``), not
+``jax.grad``; ``"reverse"`` restores reverse mode.
 """
 
 from __future__ import annotations
