@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from . import model, solve
+from . import laws, model, solve
 from .params import Mechanism
 
 
@@ -91,17 +91,13 @@ class Onsets(NamedTuple):
 
 
 def _joint_state(mech: Mechanism, t, y):
-    """(penetration, penetration rate, memory) per clearance joint at (t, y), shape (k,) each."""
-    state = model.unpack(mech, y)
-    q, qd, _ = model.coordinates(mech, state.deviation, state.deviation_rate, t)
-    pen, rate = [], []
-    for name in model.clearance_joints(mech):
-        pin, pin_vel, hole, hole_vel = model.joint_points(mech, name, q, qd, t)
-        d = pin - hole
-        eps = jnp.linalg.norm(d)
-        pen.append(eps - getattr(mech, f"joint_{name}").clearance)
-        rate.append(jnp.dot(d, pin_vel - hole_vel) / eps)
-    return jnp.stack(pen), jnp.stack(rate), state.approach_memory
+    """(penetration, penetration rate, memory) per clearance joint at (t, y), shape (k,) each
+    (rate 0 where the pin is centred)."""
+    d, d_rate = model.joint_eccentricities(mech, t, y)
+    clearance = jnp.stack([getattr(mech, f"joint_{name}").clearance for name in model.clearance_joints(mech)])
+    eps = laws.safe_norm(d)
+    rate = jnp.sum(d * d_rate, axis=-1) / jnp.where(eps > 0.0, eps, 1.0)
+    return eps - clearance, rate, model.unpack(mech, y).approach_memory
 
 
 @eqx.filter_jit

@@ -191,10 +191,18 @@ def eccentricities(
     d = pin centre - hole centre, shape (2, 2) for (B, C), m, and their rates, m/s."""
     if clearance_joints(mech) != ("B", "C"):
         raise ValueError("eccentricities() needs clearance at both B and C")
+    return joint_eccentricities(mech, t, y)
+
+
+def joint_eccentricities(
+    mech: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]
+) -> tuple[Float[Array, "joints 2"], Float[Array, "joints 2"]]:
+    """Eccentricities d = pin centre - hole centre, m, and their rates, m/s, of every
+    joint with clearance (:func:`clearance_joints` order), shape (joints, 2) each."""
     state = unpack(mech, y)
     q, qd, _ = coordinates(mech, state.deviation, state.deviation_rate, t)
     d, dd = [], []
-    for name in ("B", "C"):
+    for name in clearance_joints(mech):
         pin, pin_vel, hole, hole_vel = joint_points(mech, name, q, qd, t)
         d.append(pin - hole)
         dd.append(pin_vel - hole_vel)

@@ -104,8 +104,7 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     names = list(names)
     units = [parameter_unit(n) for n in names]
     grid = obj.grid(mech)  # concrete sample grid of the design (crank speed may be a variable below)
-    n_start, _, n_window, dt = grid
-    n_start, n_eval, _, dt = grid
+    n_start, n_eval, n_window, dt = grid
     ts = dt * jnp.arange(n_start + n_eval + 1)
     # the metrics over the samples after t_start (index > n_start), tracked during the solve
     sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, metrics_start=ts[n_start])
@@ -113,20 +112,15 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     starts = window_starts(sim, n_start, grid, obj)
     x0 = jnp.array([get_parameter(mech, n) for n in names])
 
+    # forward mode: one tangent per parameter; reverse mode: one cotangent per metric
+    jacobian = jax.jacfwd if forward_mode(obj) else jax.jacrev
+
     def jac(i):
-        def sums_of(x):
-            return window_sums(mech, names, x, starts, i, n_window, dt, obj)
+        def with_aux(x):
+            sums, ok = window_sums(mech, names, x, starts, i, n_window, dt, obj)
+            return sums, (sums, ok)
 
-        if forward_mode(obj):  # one tangent per parameter
-
-            def with_aux(x):
-                sums, ok = sums_of(x)
-                return sums, (sums, ok)
-
-            rows, (sums, ok) = jax.jacfwd(with_aux, has_aux=True)(x0)
-            return sums, rows, ok
-        sums, vjp, ok = jax.vjp(sums_of, x0, has_aux=True)
-        (rows,) = jax.vmap(vjp)(jnp.eye(sums.shape[0]))
+        rows, (sums, ok) = jacobian(with_aux, has_aux=True)(x0)
         return sums, rows, ok
 
     sums, rows, ok = jax.jit(jax.vmap(jac))(jnp.arange(starts.t.shape[0]))

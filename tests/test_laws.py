@@ -28,17 +28,17 @@ def test_hybrid_force_matches_eq7_as_written():
     assert float(laws.hybrid_elastic_force(d, c, s)) == pytest.approx(kn * d**1.5, rel=1e-12)
 
 
+def _exact_restitution(law, restitution):
+    return laws.achieved_restitution(float(laws.CONTACT_LAWS[law]().hysteresis_factor(restitution)))
+
+
 @pytest.mark.parametrize("law", jc.CONTACT_LAWS)
 @pytest.mark.parametrize("restitution", [0.3, 0.5, 0.7, 0.9])
 def test_single_impact_restitution_follows_exact_relation(paper, law, restitution):
     mech = frictionless(with_law(paper, law, restitution))
     achieved = float(impact.rebound_ratio(mech))
-    expected = laws.achieved_restitution(float(laws.CONTACT_LAWS[law]().hysteresis_factor(restitution)))
+    expected = _exact_restitution(law, restitution)
     assert abs(achieved - expected) / expected < 0.01
-
-
-def _exact_restitution(law, restitution):
-    return laws.achieved_restitution(float(laws.CONTACT_LAWS[law]().hysteresis_factor(restitution)))
 
 
 @pytest.mark.parametrize("law", jc.CONTACT_LAWS)
