@@ -5,15 +5,17 @@ At every contact onset the approach speed the damping uses (the memory, floored 
 onset (:mod:`jaxcrank.audit`). Default tolerances, 0.4 s; the paper preset and the
 issue's setting (Hunt-Crossley, Ambrosio's friction ramp). Then the cost: the solver's
 accepted and rejected steps of the 0.4 s run (tsit5, default tolerances) of each setting,
-and over 21 runs with the restitution 0.9 +- 1e-3 in steps of 1e-4 (the step count of
-one run is chaotic: a 1e-4 change of restitution moves it by thousands). Writes
-``bench/results/audit_memory.json``.
+and over an ensemble of runs with the restitution 0.9 +- 5e-3 in steps of 1e-4 (101 runs;
+the step count of one run is chaotic: a 1e-4 change of restitution moves it by up to
+20 %). Writes ``bench/results/audit_memory.json``.
 
-    python bench/audit_memory.py [--t1 0.4] [--no-steps]
+    python bench/audit_memory.py [--t1 0.4] [--no-steps] [--before FILE]
 
-The "before" rows of docs/numerics.md are this script run with the jaxcrank of commit
-a11de35 (``git checkout a11de35 -- jaxcrank``; it has no ``jaxcrank.audit``: the step
-counts only, ``--no-audit``).
+The "before" step counts are this script run with the jaxcrank of commit a11de35
+(``git checkout a11de35 -- jaxcrank``; it has no ``jaxcrank.audit``: the step counts
+only, ``--no-audit``), written to ``audit_memory_steps_a11de35.json``. ``--before FILE``
+compares with such a file: the ratio of the ensemble medians (after / before) with a
+95 % bootstrap interval (10 000 resamples of each ensemble).
 """
 
 from __future__ import annotations
@@ -34,9 +36,10 @@ SETTINGS = {
 }
 
 
-def steps(mech, t1: float) -> dict:
+def steps(mech, t1: float, half: int = 50) -> dict:
     """Accepted and rejected tsit5 steps of ``mech`` over ``t1`` s (samples every 0.1 deg
-    as in `jaxcrank simulate`), for its restitution and 21 restitutions 0.9 +- 1e-3."""
+    as in `jaxcrank simulate`), for its restitution and the ``2 half + 1`` restitutions
+    0.9 + 1e-4 k, k = -half..half."""
     import equinox as eqx
     import jax.numpy as jnp
 
@@ -47,7 +50,7 @@ def steps(mech, t1: float) -> dict:
 
     sim = jc.simulate(mech, t1)  # the preset itself, as `jaxcrank simulate` runs it
     own = int(sim.num_steps), int(sim.num_rejected)
-    rs = [round(0.899 + 1e-4 * k, 4) for k in range(21)]
+    rs = [round(0.9 + 1e-4 * k, 4) for k in range(-half, half + 1)]
     counts = [count(jnp.asarray(e)) for e in rs]
     accepted = [c[0] for c in counts]
     return {
@@ -65,16 +68,37 @@ def steps(mech, t1: float) -> dict:
     }
 
 
+def compare(before: dict, after: dict, resamples: int = 10_000) -> dict:
+    """After / before: the preset run's accepted steps, and the ensemble medians with a
+    95 % bootstrap interval (each ensemble resampled with replacement, seed 0)."""
+    a, b = np.asarray(after["accepted"]), np.asarray(before["accepted"])
+    rng = np.random.default_rng(0)
+    ratios = np.median(rng.choice(a, (resamples, a.size)), axis=1) / np.median(
+        rng.choice(b, (resamples, b.size)), axis=1
+    )
+    low, high = np.percentile(ratios, [2.5, 97.5])
+    return {
+        "own_ratio": after["own"]["accepted"] / before["own"]["accepted"],
+        "median_ratio": float(np.median(a) / np.median(b)),
+        "median_ratio_95pct_interval": [float(low), float(high)],
+        "ensemble_sizes": [int(b.size), int(a.size)],
+    }
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--t1", type=float, default=0.4)
     parser.add_argument("--no-steps", action="store_true", help="skip the step counts")
     parser.add_argument("--no-audit", action="store_true", help="step counts only")
+    parser.add_argument("--before", type=Path, help="step counts of the jaxcrank before, to compare with")
     args = parser.parse_args()
     report = {"machine": machine(), "t1_s": args.t1, "runs": {}, "steps": {}}
     if not args.no_steps:
         for name, overrides in SETTINGS.items():
             report["steps"][name] = steps(config.apply_overrides(jc.paper(), overrides), args.t1)
+            if args.before is not None:
+                before = json.loads(args.before.read_text())["steps"][name]
+                report["steps"][name]["versus_before"] = compare(before, report["steps"][name])
             print(name, json.dumps(report["steps"][name]["summary"]), flush=True)
     for name, overrides in ({} if args.no_audit else SETTINGS).items():
         mech = config.apply_overrides(jc.paper(), overrides)
