@@ -238,6 +238,8 @@ def run_sweep(args) -> int:
         out.mkdir(parents=True, exist_ok=True)
         (out / "spec.toml").write_text(args.spec.read_text())
     start = time.perf_counter()
+    # the chunk this sweep uses (on a GPU derived from its free memory), reported below
+    chunk = sweep.resolve_chunk(spec.base, spec.names, spec.settings, spec.chunk)
     table = sweep.run(
         spec.base,
         spec.names,
@@ -245,7 +247,7 @@ def run_sweep(args) -> int:
         spec.settings,
         out=out,
         resume=args.resume,
-        chunk=spec.chunk,
+        chunk=chunk,
         workers=args.workers,
         progress=not args.quiet,
     )
@@ -261,7 +263,7 @@ def run_sweep(args) -> int:
             "devices": jax.device_count(),
             "processes": jax.process_count(),
             "workers": args.workers,
-            "chunk": spec.chunk if spec.chunk is not None else sweep.default_chunk(),
+            "chunk": chunk,
             "settings": dataclasses.asdict(spec.settings),
             "versions": _versions(),
             "metric_meanings": metrics.meanings(),

@@ -69,19 +69,24 @@ METRICS = {
         "transmission_angle_error_deg",
         "largest |actual - ideal transmission angle|",
     ),
+    "rms_contact_force_B_N": ("rms", "contact_force_B_N", "RMS normal contact force at B (bearing wear proxy)"),
+    "rms_contact_force_C_N": ("rms", "contact_force_C_N", "RMS normal contact force at C (bearing wear proxy)"),
 }
 
 #: the metrics that are maxima: over a solve, :mod:`jaxcrank.tracking` takes them at
 #: every accepted step
 PEAK_METRICS = tuple(k for k, (reduction, _, _) in METRICS.items() if reduction in ("max_abs", "max"))
 
-#: the metrics that are time averages of squared deviations: the ones whose gradient
-#: the ensemble estimate of :mod:`optim.sensitivity` follows
+#: the metrics that are time averages of squares (deviations from the ideal mechanism,
+#: contact forces): the ones whose gradient the ensemble estimate of
+#: :mod:`optim.sensitivity` follows
 RMS_METRICS = (
     "rms_transmission_angle_error_deg",
     "rms_rod_x_deviation_m",
     "rms_slider_x_deviation_m",
     "rms_driving_moment_deviation_N_m",
+    "rms_contact_force_B_N",
+    "rms_contact_force_C_N",
 )
 assert {k for k, v in METRICS.items() if v[0] == "rms"} == set(RMS_METRICS)
 

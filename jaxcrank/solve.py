@@ -90,7 +90,7 @@ class Simulation(eqx.Module):
     Attributes:
         mechanism: the parameters that were simulated.
         ts: sample times, s, shape (n,) (the end time alone, shape (1,), when the
-            samples were not saved).
+            samples were not saved; the ``save_ts`` of :func:`simulate` when given).
         ys: scaled state at those times, shape (n, state size).
         result: diffrax result code (``diffrax.RESULTS``).
         num_steps: accepted steps. num_rejected: rejected steps.
@@ -235,6 +235,7 @@ def simulate(
     throw=True,
     metrics_start=None,
     save_samples=True,
+    save_ts: Float[ArrayLike, " m"] | None = None,
 ) -> Simulation:
     """Simulate the clearance mechanism from pins-centred rest relative to the
     ideal motion (or from ``y0``).
@@ -263,6 +264,9 @@ def simulate(
         save_samples: store the state at every sample time (default); ``False``
             keeps only the end state (with ``metrics_start``: memory independent of
             the number of samples).
+        save_ts: store the state at these times only, s (increasing, within the
+            solve's span), instead of at every sample time: e.g. a few restart points
+            of a solve whose metrics are tracked over all of ``ts``.
         throw: raise :class:`SimulationError` when the solve fails or produces
             non-finite values. With ``throw=False`` inspect ``Simulation.ok``
             (batch sweeps).
@@ -296,6 +300,8 @@ def simulate(
         elif span[2] < 2:
             raise ParameterError(f"tracking metrics needs n_samples >= 2, got {span[2]}")
     saved = ts if save_samples else None
+    if save_ts is not None:
+        saved = jnp.atleast_1d(jnp.asarray(save_ts, dtype=float))
     sim = _solve(mech, saved, span, y0, solver, controller, dt0, max_steps, adjoint, meter, metrics_start)
     if throw:
         sim = check(sim, max_steps=max_steps, t1=span[1])

@@ -252,6 +252,21 @@ def default_chunk(base: Mechanism | None = None, names: Sequence[str] = (), sett
     return chunk_that_fits(base, names, settings, free) * jax.device_count()
 
 
+def resolve_chunk(base: Mechanism, names: Sequence[str], settings: Settings, chunk: int | None = None) -> int:
+    """The designs per chunk a sweep of ``names`` over ``base`` uses: ``chunk``
+    (default :func:`default_chunk` for this sweep) rounded up to a multiple of the
+    device count.
+
+    Raises:
+        ParameterError: for ``chunk < 1``.
+    """
+    chunk = default_chunk(base, names, settings) if chunk is None else int(chunk)
+    if chunk < 1:
+        raise ParameterError(f"chunk = {chunk} must be >= 1")
+    n_dev = jax.device_count()
+    return -(-chunk // n_dev) * n_dev
+
+
 def check_chunk_fits(
     base: Mechanism, names: Sequence[str], settings: Settings, chunk: int, free_bytes: float | None
 ) -> None:
@@ -456,16 +471,13 @@ def run(
     # a multiple of the device count; one shape for every chunk (one compilation)
     n_dev = jax.device_count()
     given = chunk is not None
-    chunk = default_chunk(base, names, settings) if chunk is None else int(chunk)
-    if chunk < 1:
-        raise ParameterError(f"chunk = {chunk} must be >= 1")
+    chunk = resolve_chunk(base, names, settings, chunk)
     if given and todo:
-        check_chunk_fits(base, names, settings, -(-chunk // n_dev), free_device_bytes())
+        check_chunk_fits(base, names, settings, chunk // n_dev, free_device_bytes())
     if int(workers) < 1:
         raise ParameterError(f"workers = {workers} must be >= 1")
     if workers > 1 and jax.process_count() > 1:
         raise ParameterError("workers > 1 cannot be combined with a jax.distributed job: use processes instead")
-    chunk = -(-chunk // n_dev) * n_dev
     chunks = []
     for s in range(0, len(todo), chunk):
         idx = todo[s : s + chunk]

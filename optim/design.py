@@ -49,12 +49,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxcrank.metrics import RMS_METRICS
 from jaxcrank.params import ParameterError, get_parameter, paper, set_parameters
 from jaxcrank.solve import simulate
 
-from .objective import Objective, over_windows, window_starts, windows_ok
+from .objective import Objective, over_windows, tracked_solve, window_starts, windows_ok
 from .problem import Problem
-from .sensitivity import window_sums
+from .sensitivity import deviations, window_sums
 
 #: design variables that are not mechanism fields (name -> SI unit)
 DERIVED = {"min_transmission_angle": "rad", "rod_inertia_ratio": "1"}
@@ -115,29 +116,15 @@ def geometry(l2, alpha, stroke, iterations: int = 64):
     return 0.5 * (a + d), 0.5 * (a - d)
 
 
-def _metrics(mech, ts, ys):
-    """Per-sample quantities whose mean squares are the objective's terms, (n, 6):
-    the signals of :data:`jaxcrank.metrics.RMS_METRICS` (deg, m, m, N m) and the
-    normal contact forces at B and C (N), from one :func:`jaxcrank.model.evaluate`."""
-    from jaxcrank import metrics, model
-
-    def one(t, y):
-        f = model.evaluate(mech, t, y)
-        forces = metrics.signals(f)
-        return jnp.concatenate(
-            [metrics.rms_signals(f), jnp.stack([forces["contact_force_B_N"], forces["contact_force_C_N"]])]
-        )
-
-    return jax.vmap(one)(ts, ys)
-
-
 def _safe_sqrt(x):
     pos = x > 0.0
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
 def _terms(mean_squares):
-    """The :data:`TERMS` values, (5,), from the mean squares of :func:`_metrics`' columns."""
+    """The :data:`TERMS` values, (5,), from the mean squares of the signals of
+    :data:`jaxcrank.metrics.RMS_METRICS` (:func:`optim.sensitivity.deviations`' columns:
+    deg, m, m, N m and the contact forces at B and C, N)."""
     ms = mean_squares
     return _safe_sqrt(jnp.concatenate([ms[:4], 0.5 * (ms[4:5] + ms[5:6])]))
 
@@ -318,7 +305,7 @@ class DesignProblem(Problem):
         grid = obj.grid(self.base)
         sim, n_start = self._solve(self.mechanism(x), grid, throw)
         late = slice(n_start + 1, None)
-        vals = _terms(jnp.mean(_metrics(sim.mechanism, sim.ts[late], sim.ys[late]) ** 2, axis=0))
+        vals = _terms(jnp.mean(deviations(sim.mechanism, sim.ts[late], sim.ys[late]) ** 2, axis=0))
         return vals, sim.ok & jnp.all(jnp.isfinite(vals))
 
     def _solve(self, mech, grid, throw):
@@ -348,15 +335,13 @@ class DesignProblem(Problem):
         grid = obj.grid(self.base)
         _, _, n_window, dt = grid
         sg = jax.lax.stop_gradient
-        sim, n_start = self._solve(sg(self.mechanism(x)), grid, obj.on_failure == "raise")
-        late = slice(n_start + 1, None)
-        exact = _terms(jnp.mean(_metrics(sim.mechanism, sim.ts[late], sim.ys[late]) ** 2, axis=0))
+        # the exact terms tracked during one solve that stores only the windows' starts
+        sim = tracked_solve(sg(self.mechanism(x)), obj, obj.on_failure == "raise", grid)
+        exact = _terms(jnp.stack([sim.metrics[k] for k in RMS_METRICS]) ** 2)
         exact = jnp.where(sim.ok, exact, jnp.nan)
-        starts = window_starts(sim, n_start, grid, obj)
+        starts = window_starts(sim)
         names, values = self.physical(x)
-        sums, ok = over_windows(
-            lambda i: window_sums(self.base, names, values, starts, i, n_window, dt, obj, metrics=_metrics), starts
-        )
+        sums, ok = over_windows(lambda i: window_sums(self.base, names, values, starts, i, n_window, dt, obj), starts)
         n_ok = windows_ok(ok, obj)
         surrogate = _terms(jnp.sum(ok[:, None] * sums, axis=0) / (n_window * n_ok))
         return sg(exact) + (surrogate - sg(surrogate))

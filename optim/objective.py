@@ -150,7 +150,8 @@ class Objective(eqx.Module):
 def eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid) -> tuple[Simulation, int, Float[Array, " eval"]]:
     """One solve from the pins-centred start over the objective's sample ``grid``
     (:meth:`Objective.grid`, computed by the caller while the crank speed is still
-    concrete): the simulation, the sample index of t_start and the
+    concrete) that stores every sample, for the pathwise method's reverse-mode
+    gradient: the simulation, the sample index of t_start and the
     transmission-angle errors (deg) at the samples in (t_start, t_end]."""
     n_start, n_eval, _, dt = grid
     ts = dt * jnp.arange(n_start + n_eval + 1)
@@ -193,25 +194,50 @@ class Starts(NamedTuple):
     clearance: jax.Array
 
 
-def reference(mech: Mechanism, obj: Objective = Objective()) -> tuple[Float[Array, ""], Starts]:
-    """One forward solve from the pins-centred start (no gradient): the Eq. 19
-    value (degrees) and the :class:`Starts` of the ensemble windows."""
-    grid = obj.grid(mech)
-    mech = jax.lax.stop_gradient(mech)
-    sim, n_start, err = eval_samples(mech, obj, obj.on_failure == "raise", grid)
-    exact = _nan_unless(sim.ok, jnp.sqrt(jnp.mean(err**2)))
-    return jax.lax.stop_gradient(exact), window_starts(sim, n_start, grid, obj)
-
-
-def window_starts(sim: Simulation, n_start: int, grid, obj: Objective) -> Starts:
-    """The :class:`Starts` of the ensemble windows of ``obj`` taken from a solve
-    ``sim`` over the objective's sample ``grid`` (no gradient)."""
-    _, n_eval, n_window, _ = grid
-    mech = jax.lax.stop_gradient(sim.mechanism)
+def window_start_indices(grid, obj: Objective) -> np.ndarray:
+    """Sample indices (on the objective's ``grid``, :meth:`Objective.grid`) of the
+    starts of the K ensemble windows, spread evenly over the evaluation window."""
+    n_start, n_eval, n_window, _ = grid
     tiles = n_eval // n_window
     k = tiles if obj.windows <= 0 else min(obj.windows, tiles)
-    idx = n_start + n_window * ((jnp.arange(k) * tiles) // k)  # k windows spread evenly
-    t0s, y0s = sim.ts[idx], sim.ys[idx]
+    return n_start + n_window * ((np.arange(k) * tiles) // k)
+
+
+def tracked_solve(mech: Mechanism, obj: Objective, throw: bool, grid) -> Simulation:
+    """One solve from the pins-centred start over the objective's sample ``grid``
+    (:meth:`Objective.grid`) that stores the state only at the ensemble windows'
+    starts (:func:`window_start_indices`) and tracks the RMS metrics over the samples
+    in (t_start, t_end] during the solve (:mod:`jaxcrank.tracking`): memory independent
+    of the number of samples. Forward mode only (no reverse-mode gradient through it)."""
+    n_start, n_eval, _, dt = grid
+    ts = dt * np.arange(n_start + n_eval + 1)
+    return simulate(
+        mech,
+        ts=ts,
+        save_ts=ts[window_start_indices(grid, obj)],
+        metrics_start=(n_start + 0.5) * dt,  # between samples: no rounding decides membership
+        rtol=obj.rtol,
+        atol=obj.atol,
+        max_steps=obj.max_steps,
+        throw=throw,
+    )
+
+
+def reference(mech: Mechanism, obj: Objective = Objective()) -> tuple[Float[Array, ""], Starts]:
+    """One forward solve from the pins-centred start (no gradient, :func:`tracked_solve`):
+    the Eq. 19 value (degrees) and the :class:`Starts` of the ensemble windows."""
+    grid = obj.grid(mech)
+    mech = jax.lax.stop_gradient(mech)
+    sim = tracked_solve(mech, obj, obj.on_failure == "raise", grid)
+    exact = _nan_unless(sim.ok, sim.metrics["rms_transmission_angle_error_deg"])
+    return jax.lax.stop_gradient(exact), window_starts(sim)
+
+
+def window_starts(sim: Simulation) -> Starts:
+    """The :class:`Starts` of the ensemble windows from a :func:`tracked_solve`, whose
+    stored samples are the windows' starts (no gradient)."""
+    mech = jax.lax.stop_gradient(sim.mechanism)
+    t0s, y0s = sim.ts, sim.ys
     d, d_rate = jax.vmap(model.eccentricities, in_axes=(None, 0, 0))(mech, t0s, y0s)
     clearance = jnp.stack([mech.joint_B.clearance, mech.joint_C.clearance])
     rest = model.auxiliary(mech, y0s)  # SI: the scales change with the clearances

@@ -16,9 +16,9 @@ differentiated (forward mode by default, one tangent per parameter;
 ``Objective.window_gradient = "reverse"`` for reverse-mode Jacobians), and the
 ensemble mean is taken.
 
-Valid for: time averages of squared deviations, i.e. the RMS metrics
-(transmission-angle error, rod-centre and slider x deviation, driving-moment
-deviation). Not valid for: peaks (largest contact force, largest deviation,
+Valid for: time averages of squares, i.e. the RMS metrics (transmission-angle
+error, rod-centre and slider x deviation, driving-moment deviation, contact forces
+at B and C). Not valid for: peaks (largest contact force, largest deviation,
 largest acceleration): an extreme value over chaotic impacts has no trend-following
 local derivative (use a sweep over a band, :mod:`jaxcrank.sweep`, for those).
 """
@@ -34,9 +34,9 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from jaxcrank import metrics, model
 from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
-from jaxcrank.solve import Simulation, simulate
+from jaxcrank.solve import Simulation
 
-from .objective import Objective, forward_mode, solve_window, window_starts
+from .objective import Objective, forward_mode, solve_window, tracked_solve, window_starts
 
 #: metrics whose gradient the ensemble estimate follows: the RMS metrics of
 #: :mod:`jaxcrank.metrics` (units in the suffix)
@@ -60,14 +60,15 @@ PARAMETERS = (
 
 
 def deviations(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, "n 4"]:
-    """Per-sample deviations from the ideal mechanism behind :data:`METRICS`, shape
-    (n, 4), in that order and in their units (deg, m, m, N m)."""
+    """Per-sample signals behind :data:`METRICS` (deviations from the ideal mechanism
+    and the contact forces), shape (n, 6), in that order and in their units
+    (deg, m, m, N m, N, N)."""
     return jax.vmap(lambda t, y: metrics.rms_signals(model.evaluate(mech, t, y)))(ts, ys)
 
 
 def metric_values(sim: Simulation) -> Float[Array, " 4"]:
     """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
-    :mod:`jaxcrank.tracking`), shape (4,), in their units."""
+    :mod:`jaxcrank.tracking`), shape (6,), in their units."""
     return jnp.stack([sim.metrics[k] for k in METRICS])
 
 
@@ -80,17 +81,14 @@ def window_sums(
     n_window: int,
     dt: float,
     obj: Objective,
-    metrics=deviations,
 ) -> tuple[Float[Array, " metrics"], Bool[Array, ""]]:
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
-    carried-over start state: the sums of squared deviations over its samples,
-    shape (4,), in the units of :data:`METRICS` squared, and whether it finished.
-
-    ``metrics``: the per-sample quantities ``(mech, ts, ys) -> (n, M)`` whose squares
-    are summed (default :func:`deviations`; :mod:`optim.design` adds contact forces)."""
+    carried-over start state: the sums of squares of :func:`deviations` over its
+    samples, shape (6,), in the units of :data:`METRICS` squared, and whether it
+    finished."""
     m = set_parameters(base, names, x)
     ts, ys, ok = solve_window(m, starts, i, n_window, dt, obj)
-    return jnp.sum(metrics(m, ts, ys) ** 2, axis=0), ok
+    return jnp.sum(deviations(m, ts, ys) ** 2, axis=0), ok
 
 
 def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objective = Objective()) -> dict:
@@ -98,18 +96,19 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     objective's window (``obj``: window, ensemble windows, solver, tolerances).
 
     Returns a dict: ``names``, ``units`` (of each parameter), ``x`` (SI values),
-    ``metrics`` (names), ``value`` (4,) exact metric values, ``gradient`` (4, P)
-    in metric unit per parameter unit, ``elasticity`` (4, P) dimensionless,
+    ``metrics`` (names), ``value`` (6,) exact metric values, ``gradient`` (6, P)
+    in metric unit per parameter unit (0 for a metric that is 0 over every window),
+    ``elasticity`` (6, P) dimensionless (0 for a metric whose value is 0),
     ``windows`` and ``windows_ok`` (ensemble size and how many finished)."""
     names = list(names)
     units = [parameter_unit(n) for n in names]
     grid = obj.grid(mech)  # concrete sample grid of the design (crank speed may be a variable below)
-    n_start, n_eval, n_window, dt = grid
-    ts = dt * jnp.arange(n_start + n_eval + 1)
-    # the metrics over the samples after t_start (index > n_start), tracked during the solve
-    sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, metrics_start=ts[n_start])
+    _, _, n_window, dt = grid
+    # the metrics over the samples in (t_start, t_end] tracked during the solve, which
+    # stores only the windows' starts
+    sim = tracked_solve(mech, obj, True, grid)
     value = metric_values(sim)
-    starts = window_starts(sim, n_start, grid, obj)
+    starts = window_starts(sim)
     x0 = jnp.array([get_parameter(mech, n) for n in names])
 
     # forward mode: one tangent per parameter; reverse mode: one cotangent per metric
@@ -134,9 +133,13 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     w = ok.astype(float)
     estimate = np.sqrt(np.einsum("k,kc->c", w, sums) / (n_window * n_ok))
     grad_sq = np.einsum("k,kcp->cp", w, rows) / (n_window * n_ok)
-    gradient = grad_sq / (2.0 * estimate[:, None])
+    # d sqrt(ms) = d ms / (2 sqrt(ms)); a metric that is zero over every window (no
+    # contact in them) has a zero mean square and zero gradient: 0, not 0/0
+    positive = estimate[:, None] > 0.0
+    gradient = np.where(positive, grad_sq / np.where(positive, 2.0 * estimate[:, None], 1.0), 0.0)
     value = np.asarray(value)
     x = np.asarray(x0)
+    nonzero = value[:, None] != 0.0
     return {
         "names": names,
         "units": units,
@@ -144,7 +147,7 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
         "metrics": list(METRICS),
         "value": value,
         "gradient": gradient,
-        "elasticity": gradient * x[None, :] / value[:, None],
+        "elasticity": np.where(nonzero, gradient * x[None, :] / np.where(nonzero, value[:, None], 1.0), 0.0),
         "windows": int(len(ok)),
         "windows_ok": n_ok,
         "window_s": float(n_window * dt),

@@ -9,6 +9,7 @@ import pytest
 
 import jaxcrank as jc
 from jaxcrank import metrics, outputs, sweep
+from jaxcrank.params import set_parameters
 
 
 def test_tracked_rms_equals_the_rms_of_stored_samples_and_peaks_do_not_depend_on_sampling():
@@ -69,3 +70,36 @@ def test_chunk_that_fits_and_the_error_for_one_that_does_not():
     with pytest.raises(jc.ParameterError, match=rf"chunk = {4 * fits} .* use chunk <= {fits} per device"):
         sweep.check_chunk_fits(base, names, settings, 4 * fits, budget)
     sweep.check_chunk_fits(base, names, settings, fits, budget)  # fits: no error
+
+
+def _reference_program_bytes(samples_per_degree):
+    from optim import objective as O
+
+    obj = O.Objective(t_start=0.002, t_end=0.004, window=5e-4, windows=4, samples_per_degree=samples_per_degree)
+    grid = obj.grid(jc.paper())
+    base = jc.paper()
+    program = jax.jit(lambda length: O.tracked_solve(set_parameters(base, ["rod_length"], length), obj, False, grid))
+    memory = program.lower(jnp.array([0.403])).compile().memory_analysis()
+    return memory.temp_size_in_bytes + memory.output_size_in_bytes
+
+
+def test_objective_solve_stores_only_the_window_starts():
+    """The design objective's forward solve (optim.objective.tracked_solve, behind the
+    Eq. 19 value, sensitivities and design terms) tracks its metrics and stores the
+    K window starts only: the same bytes at 1 and 100 samples per degree, and the
+    same value and start states as a solve that stores every sample (to rounding)."""
+    from optim import objective as O
+
+    assert _reference_program_bytes(1) == _reference_program_bytes(100)
+    obj = O.Objective(t_start=0.002, t_end=0.004, window=5e-4, windows=4)
+    mech = jc.paper()
+    grid = obj.grid(mech)
+    n_start, n_eval, _, dt = grid
+    sim = O.tracked_solve(mech, obj, True, grid)
+    assert sim.ys.shape[0] == 4
+    stored = jc.simulate(mech, ts=dt * np.arange(n_start + n_eval + 1))
+    idx = O.window_start_indices(grid, obj)
+    np.testing.assert_allclose(np.asarray(sim.ys), np.asarray(stored.ys)[idx], rtol=1e-12, atol=1e-12)
+    err = outputs.transmission_angle_error(mech, stored.ts[n_start + 1 :], stored.ys[n_start + 1 :])
+    rms = float(jnp.sqrt(jnp.mean(err**2)))
+    assert float(sim.metrics["rms_transmission_angle_error_deg"]) == pytest.approx(rms, rel=1e-12)
