@@ -6,7 +6,12 @@ Methods (every one minimises the same objective of the same problem over the
 scaled design box [0, 1]^n):
 
 - ``ours``: :func:`optim.optimize.optimize` (projected Adam on the ensemble gradient),
-  one process;
+  one run from the seed's start in one process (it stops when it converges, usually
+  well inside the budget);
+- ``ours_multistart``: the same Adam runs from :func:`optim.optimize.start_points` (the
+  seed's start, then scrambled Sobol points), two at a time over the 2-process pool,
+  until the budget is spent (what :func:`optim.optimize.multistart` does one run after
+  another);
 - ``cma``: CMA-ES (``cma`` package), each generation evaluated over a 2-process pool;
 - ``nelder_mead``: scipy's bounded Nelder-Mead, sequential (one process);
 - ``tpe``: optuna's TPE sampler, asked two trials at a time, evaluated over the pool;
@@ -222,6 +227,53 @@ def run_sobol(pool, n, start, seed, budget):
     return r.trace
 
 
+def _warm_ours(_):
+    """Compile our value-and-gradient program in a pool worker: seconds of its first
+    call minus a warm call."""
+    return compile_ours(_W["problem"])[0]
+
+
+def _adam_run(job):
+    """One projected-Adam run in a pool worker from the unit design ``u``: the end times
+    of its iterations (s from the call) and the iterates (unit designs)."""
+    import dataclasses
+
+    from optim.optimize import Settings, optimize
+
+    u, iterations = job
+    p = _W["problem"]
+    prob = dataclasses.replace(p, start=tuple(float(v) for v in np.asarray(p.from_unit(np.asarray(u)))))
+    t0 = time.perf_counter()
+    res = optimize(prob, Settings(method="adam", max_iterations=iterations, learning_rate=0.1), progress=False)
+    wall = time.perf_counter() - t0
+    secs = np.array([h["seconds"] for h in res["history"]])
+    ends = (wall - secs.sum()) + np.cumsum(secs)
+    us = [np.asarray(p.to_unit(np.asarray([h[f"{nm}_SI"] for nm in p.names]))).tolist() for h in res["history"]]
+    return ends.tolist(), us
+
+
+def run_ours_multistart(pool, problem, start, seed, budget, iterations):
+    """Adam runs from the seed's start and then Sobol points, two at a time over the pool,
+    until ``budget`` s of wall time (compile excluded: the workers compiled first) are
+    spent; iterates re-scored by the common evaluator (untimed)."""
+    import dataclasses
+
+    from optim.optimize import start_points
+
+    x0 = tuple(float(v) for v in np.asarray(problem.from_unit(np.asarray(start))))
+    points = start_points(dataclasses.replace(problem, start=x0), 256, seed)
+    trace, used, k = [], 0.0, 0
+    while used < budget and k < len(points):
+        tic = time.perf_counter()
+        outs = list(pool.map(_adam_run, [(u, iterations) for u in points[k : k + 2]]))
+        wall = time.perf_counter() - tic
+        for ends, us in outs:
+            values = list(pool.map(_score, us))
+            trace += [(used + float(e), v) for e, v in zip(ends, values)]
+        used, k = used + wall, k + 2
+    return sorted(trace), k
+
+
 def run_ours(problem, start, iterations, pool):
     """Projected Adam from ``start`` (unit box): compile-excluded trace (the caller
     compiled first), iterates re-scored by the common evaluator (untimed)."""
@@ -259,6 +311,8 @@ def compile_ours(problem):
     return first - (time.perf_counter() - t), time.perf_counter() - t
 
 
+#: our gradient-based methods (the rest are the gradient-free baselines)
+OURS = ("ours", "ours_multistart")
 METHODS = {"cma": run_cma, "nelder_mead": run_nelder_mead, "tpe": run_tpe, "sobol": run_sobol}
 
 
@@ -313,13 +367,13 @@ def summarise(runs: dict, compile_s: dict) -> dict:
             "runs": rs,
         }
 
-    def speedup(key, with_compile=False):
+    def speedup(key, with_compile=False, which="ours"):
         def t(m):
             x = methods[m][key]
             return None if x is None else x + (compile_s[m] if with_compile else 0.0)
 
-        ours = t("ours")
-        free = [t(m) for m in methods if m != "ours" and t(m) is not None]
+        ours = t(which)
+        free = [t(m) for m in methods if m not in OURS and t(m) is not None]
         if ours is None:
             return None
         return min(free) / ours if free else math.inf
@@ -333,6 +387,17 @@ def summarise(runs: dict, compile_s: dict) -> dict:
         "speedup_vs_best_gradient_free_with_compile": speedup("time_to_1pct_s", True),
         "speedup_vs_best_gradient_free_5pct": speedup("time_to_5pct_s"),
         "speedup_vs_best_gradient_free_5pct_with_compile": speedup("time_to_5pct_s", True),
+        **(
+            {
+                "speedup_vs_best_gradient_free_multistart": speedup("time_to_1pct_s", which="ours_multistart"),
+                "speedup_vs_best_gradient_free_multistart_with_compile": speedup(
+                    "time_to_1pct_s", True, which="ours_multistart"
+                ),
+                "speedup_vs_best_gradient_free_multistart_5pct": speedup("time_to_5pct_s", which="ours_multistart"),
+            }
+            if "ours_multistart" in methods
+            else {}
+        ),
     }
 
 
@@ -390,12 +455,13 @@ def main(argv=None):
             compile_pool = max(w[0] - w[1] for w in warm)
             eval_s = float(np.mean([w[1] for w in warm]))
             compile_own, iter_s = compile_ours(problem)
+            compile_workers = max(pool.map(_warm_ours, range(2)))
             print(
                 f"   compile: evaluator {compile_pool:.1f} s (eval {eval_s:.2f} s), ours {compile_own:.1f} s "
                 f"(warm value+gradient {iter_s:.2f} s)",
                 flush=True,
             )
-            runs = {m: [] for m in ["ours", *METHODS]}
+            runs = {m: [] for m in [*OURS, *METHODS]}
             rng = np.random.default_rng(1234)
             for seed in range(args.seeds):
                 start = rng.uniform(0.15, 0.85, n)
@@ -410,11 +476,20 @@ def main(argv=None):
                     }
                 )
                 print(f"   seed {seed} ours: {min(v for _, v in trace):.6g} in {trace[-1][0]:.1f} s", flush=True)
+                trace, started = run_ours_multistart(pool, problem, start, seed, budget, iterations)
+                runs["ours_multistart"].append(
+                    {"seed": seed, "start_unit": start.tolist(), "trace": trace, "adam_runs": started}
+                )
+                print(
+                    f"   seed {seed} ours_multistart: {min(v for _, v in trace):.6g} from {started} starts",
+                    flush=True,
+                )
                 for m, fn in METHODS.items():
                     trace = fn(pool, n, start, seed, budget)
                     runs[m].append({"seed": seed, "trace": trace, "evaluations": len(trace)})
                     print(f"   seed {seed} {m}: {min(v for _, v in trace):.6g} in {len(trace)} evaluations", flush=True)
-        compile_s = {m: (compile_own if m == "ours" else compile_pool) for m in runs}
+        compile_s = {"ours": compile_own, "ours_multistart": compile_workers}
+        compile_s.update({m: compile_pool for m in METHODS})
         entry = {
             "name": name,
             "n_variables": n,
@@ -443,7 +518,14 @@ def plot(results, path):
 
     probs = results["problems"]
     fig, axes = plt.subplots(1, len(probs), figsize=(5 * len(probs), 4), squeeze=False)
-    colors = {"ours": "k", "cma": "tab:blue", "nelder_mead": "tab:orange", "tpe": "tab:green", "sobol": "tab:red"}
+    colors = {
+        "ours": "k",
+        "ours_multistart": "tab:purple",
+        "cma": "tab:blue",
+        "nelder_mead": "tab:orange",
+        "tpe": "tab:green",
+        "sobol": "tab:red",
+    }
     for ax, p in zip(axes[0], probs):
         for m, d in p["methods"].items():
             for k, r in enumerate(d["runs"]):
@@ -457,7 +539,7 @@ def plot(results, path):
                     where="post",
                     color=colors.get(m),
                     alpha=0.8,
-                    lw=1.5 if m == "ours" else 1,
+                    lw=1.5 if m in OURS else 1,
                     label=m if k == 0 else None,
                 )
         ax.axhline(p["target_1pct"], color="grey", ls=":", label="best + 1 %")

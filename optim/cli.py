@@ -50,7 +50,7 @@ from jaxcrank import config as mech_config
 from jaxcrank.params import ParameterError
 
 from .objective import Objective
-from .optimize import METHODS, Settings, optimize
+from .optimize import METHODS, Settings, multistart, optimize
 from .problem import PROBLEMS, Problem
 
 PAPER_OPTIMUM_DEG = reference.value("optimisation", "optimum_deg")
@@ -71,6 +71,12 @@ def add_parser(sub):
     p.add_argument("--problem", choices=sorted(PROBLEMS), help="problem preset (overrides the config's)")
     p.add_argument("--method", choices=METHODS, help="optimiser (default adam)")
     p.add_argument("--iterations", type=int, help="max iterations (default 30)")
+    p.add_argument(
+        "--starts",
+        type=int,
+        help="optimise from this many designs (the problem's start, then Sobol points of the box) "
+        "and keep the best; each in --out/start_NNN (default 1)",
+    )
     p.add_argument("--t-end", type=float, help="end of the evaluation window, s (default 0.3)")
     p.add_argument("--windows", type=int, help="ensemble windows for the gradient (0 = all)")
     p.add_argument("--grid", type=int, default=21, help="grid points per axis for the landscape (0: none)")
@@ -108,7 +114,7 @@ def _settings(args):
         )
     if args.problem:
         cfg["problem"] = args.problem
-    for key, val in (("method", args.method), ("max_iterations", args.iterations)):
+    for key, val in (("method", args.method), ("max_iterations", args.iterations), ("starts", args.starts)):
         if val is not None:
             cfg.setdefault("optimizer", {})[key] = val
     for key, val in (("t_end", args.t_end), ("windows", args.windows)):
@@ -204,15 +210,19 @@ def run(args) -> int:
     )
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    if not args.resume and (out / "checkpoint.npz").exists():
-        raise ParameterError(
-            f"{out} already holds a run (checkpoint.npz): pass --resume to continue it or choose another --out"
-        )
+    for held in ("checkpoint.npz", "multistart.json"):
+        if not args.resume and (out / held).exists():
+            raise ParameterError(
+                f"{out} already holds a run ({held}): pass --resume to continue it or choose another --out"
+            )
     (out / "optimize.toml").write_text(
         tomli_w.dumps(_drop_none(resolved(problem, settings, cfg.get("problem", "paper"))))
     )
     tic = time.perf_counter()
-    res = optimize(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
+    if settings.starts > 1:
+        res = multistart(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
+    else:
+        res = optimize(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
     wall = time.perf_counter() - tic
     hist = res["history"]
     plots.plot_history(hist, out / "history.png", title=problem.description)
@@ -252,6 +262,8 @@ def run(args) -> int:
         "final_objective_deg": res["final_objective"],
         "reduction_percent": 100.0 * (f_start - res["final_objective"]) / f_start,
         "wall_seconds_this_call": wall,
+        "starts": res.get("runs"),
+        "best_start": res.get("best_start"),
         "grid": grid_info,
         "paper": {
             "optimum_deg": PAPER_OPTIMUM_DEG,

@@ -65,6 +65,9 @@ class Settings:
         xtol: stop when the design moves less than this ``patience`` times in a row.
         penalty: L-BFGS's out-of-set penalty weight.
         max_linesearch_steps: L-BFGS line-search budget per iteration.
+        starts: designs to optimise from (:func:`multistart`): the problem's start, then
+            ``starts - 1`` scrambled Sobol points of the box; 1 runs :func:`optimize` alone.
+        seed: seed of those Sobol points.
     """
 
     method: str = "adam"
@@ -75,6 +78,8 @@ class Settings:
     patience: int = 3
     penalty: float = 10.0
     max_linesearch_steps: int = 6
+    starts: int = 1
+    seed: int = 0
 
     def __post_init__(self):
         from jaxcrank.params import ParameterError
@@ -83,6 +88,8 @@ class Settings:
             raise ParameterError(f"optimiser method {self.method!r} is unknown; valid: {', '.join(METHODS)}")
         if self.max_iterations < 1 or self.learning_rate <= 0 or self.gtol < 0 or self.xtol < 0:
             raise ParameterError("max_iterations must be >= 1, learning_rate > 0, gtol and xtol >= 0")
+        if not (isinstance(self.starts, int) and self.starts >= 1):
+            raise ParameterError(f"starts = {self.starts!r} must be an integer >= 1")
 
 
 def _optimizer(settings: Settings):
@@ -304,6 +311,98 @@ def optimize(
         "final_objective": best["objective_deg"],
         "last": [history[-1][f"{n}_SI"] for n in problem.names],
     }
+
+
+def start_points(problem: Problem, count: int, seed: int = 0) -> np.ndarray:
+    """``count`` scaled start designs, shape (count, n): the problem's own start
+    (:meth:`Problem.start_unit`), then scrambled Sobol points of the unit box (``seed``)
+    projected onto the feasible set (:meth:`Problem.project`).
+
+    Raises:
+        ParameterError: for ``count < 1``.
+    """
+    import warnings
+
+    from scipy.stats import qmc
+
+    if count < 1:
+        raise ParameterError(f"starts = {count} must be >= 1")
+    first = np.asarray(problem.start_unit(), dtype=float)[None]
+    if count == 1:
+        return first
+    with warnings.catch_warnings():  # Sobol's balance warning for counts that are not powers of 2
+        warnings.simplefilter("ignore", UserWarning)
+        points = qmc.Sobol(d=problem.n, scramble=True, seed=seed).random(count - 1)
+    projected = np.stack([np.asarray(problem.project(jnp.asarray(p)), dtype=float) for p in points])
+    return np.concatenate([first, projected])
+
+
+def multistart(
+    problem: Problem,
+    settings: Settings = Settings(),
+    out: Path | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> dict:
+    """Minimise ``problem`` from ``settings.starts`` designs (:func:`start_points`), one
+    run of :func:`optimize` after another, all sharing its compiled programs. For
+    objectives with several basins (impact-dominated designs often have them), the best
+    of several local runs.
+
+    Args:
+        out: run directory: start k runs in ``out/start_k`` (k = 000, 001, ...) with its
+            own checkpoint, and ``multistart.json`` records the start designs and the
+            finished runs (no checkpoints when None).
+        resume: continue the runs in ``out``: finished starts are read back from their
+            checkpoints, the interrupted one resumes, the rest run.
+
+    Returns :func:`optimize`'s dict of the best run (lowest ``final_objective``), plus
+    ``runs`` (per start: ``start_unit``, ``final``, ``final_objective``, ``converged``,
+    ``iterations``) and ``best_start`` (its index).
+
+    Raises:
+        ParameterError: ``out`` already holds a multistart run and ``resume`` is False, or
+            the run there was made with other start designs.
+    """
+    points = start_points(problem, settings.starts, settings.seed)
+    plan = None
+    if out is not None:
+        out = Path(out)
+        plan = out / "multistart.json"
+        if plan.exists():
+            if not resume:
+                raise ParameterError(f"{out} already holds a multistart run: pass --resume or choose another --out")
+            try:
+                recorded = np.asarray(json.loads(plan.read_text())["start_unit"], dtype=float)
+            except (ValueError, KeyError, TypeError) as err:
+                raise CorruptFileError(f"{plan}: cannot be read ({err})") from None
+            if recorded.shape != points.shape or not np.array_equal(recorded, points):
+                raise ParameterError(
+                    f"{plan}: the run was made from other start designs (starts, seed or problem differ)"
+                )
+        out.mkdir(parents=True, exist_ok=True)
+    results, runs = [], []
+    for k, u in enumerate(points):
+        x0 = tuple(float(v) for v in np.asarray(problem.from_unit(jnp.asarray(u))))
+        run_dir = None if out is None else out / f"start_{k:03d}"
+        again = run_dir is not None and resume and (run_dir / "checkpoint.npz").exists()
+        res = optimize(dataclasses.replace(problem, start=x0), settings, out=run_dir, resume=again, progress=progress)
+        results.append(res)
+        runs.append(
+            {
+                "start_unit": u.tolist(),
+                "final": res["final"],
+                "final_objective": res["final_objective"],
+                "converged": res["converged"],
+                "iterations": len(res["history"]),
+            }
+        )
+        if plan is not None:
+            tmp = plan.with_suffix(".tmp")
+            tmp.write_text(json.dumps({"start_unit": points.tolist(), "seed": settings.seed, "runs": runs}, indent=1))
+            tmp.replace(plan)
+    best = int(np.argmin([r["final_objective"] for r in runs]))
+    return {**results[best], "runs": runs, "best_start": best}
 
 
 def _checkpoint(out: Path, problem, settings, u, state, history, f0, quiet, converged):

@@ -268,11 +268,11 @@ def test_bench_design_writes_the_schema(tmp_path):
     data = json.loads(out.read_text())
     (p,) = data["problems"]
     assert p["name"] == "paper_2var" and p["n_variables"] == 2
-    assert set(p["methods"]) == {"ours", "cma", "nelder_mead", "tpe", "sobol"}
+    assert set(p["methods"]) == {"ours", "ours_multistart", "cma", "nelder_mead", "tpe", "sobol"}
     for m in p["methods"].values():
         assert {"time_to_1pct_s", "best", "compile_s", "time_to_1pct_s_with_compile"} <= set(m)
         assert m["best"] >= p["best_value_any_method"]
-    assert "speedup_vs_best_gradient_free" in p
+    assert "speedup_vs_best_gradient_free" in p and "speedup_vs_best_gradient_free_multistart" in p
     assert out.with_suffix(".png").exists()
 
 

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from jaxcrank import paper
+from jaxcrank.params import ParameterError
 from optim import objective as O
 from optim import search
-from optim.optimize import Settings, optimize, programs
+from optim.optimize import Settings, multistart, optimize, programs, start_points
 from optim.problem import Problem, paper_problem, robust_problem, tolerance_problem
 
 # Short ensemble objective: evaluation window (0.02, 0.03] s (impacts from the first
@@ -321,6 +322,48 @@ def test_resume_reproduces_the_uninterrupted_history(tmp_path, method):
         for k in a:
             if k != "seconds":
                 assert a[k] == b[k], (k, a[k], b[k])
+
+
+def test_start_points_are_the_start_then_feasible_sobol_points():
+    prob = paper_problem(CHEAP)
+    pts = start_points(prob, 5, seed=3)
+    assert pts.shape == (5, 2)
+    np.testing.assert_array_equal(pts[0], np.asarray(prob.start_unit()))
+    assert all(bool(prob.feasible(prob.from_unit(jnp.asarray(p)))) for p in pts)
+    np.testing.assert_array_equal(pts, start_points(prob, 5, seed=3))  # deterministic
+    assert not np.array_equal(pts[1:], start_points(prob, 5, seed=4)[1:])
+    with pytest.raises(ParameterError, match="starts = 0"):
+        start_points(prob, 0)
+
+
+def test_multistart_keeps_the_best_run_and_a_killed_run_resumes_without_redoing_finished_starts(tmp_path):
+    """Three starts of two iterations each: the result is the run with the lowest final
+    objective; a run killed after its second start (its third start directory gone and
+    multistart.json listing two runs) resumes to the same runs, leaving the finished
+    starts' checkpoints untouched."""
+    import json
+    import shutil
+
+    prob = paper_problem(CHEAP)
+    settings = Settings(max_iterations=2, gtol=0.0, xtol=0.0, starts=3)
+    full = multistart(prob, settings, out=tmp_path / "full", progress=False)
+    finals = [r["final_objective"] for r in full["runs"]]
+    assert len(finals) == 3 and full["final_objective"] == min(finals) == finals[full["best_start"]]
+    cut = tmp_path / "cut"
+    shutil.copytree(tmp_path / "full", cut)
+    shutil.rmtree(cut / "start_002")
+    plan = json.loads((cut / "multistart.json").read_text())
+    plan["runs"] = plan["runs"][:2]
+    (cut / "multistart.json").write_text(json.dumps(plan))
+    stamp = (cut / "start_000" / "checkpoint.npz").stat().st_mtime_ns
+    with pytest.raises(ParameterError, match="already holds a multistart run"):
+        multistart(prob, settings, out=cut, progress=False)
+    resumed = multistart(prob, settings, out=cut, resume=True, progress=False)
+    assert resumed["runs"] == full["runs"]
+    assert (cut / "start_000" / "checkpoint.npz").stat().st_mtime_ns == stamp
+    other = dataclasses.replace(settings, seed=1)
+    with pytest.raises(ParameterError, match="other start designs"):
+        multistart(prob, other, out=cut, resume=True, progress=False)
 
 
 def test_optimiser_reaches_the_trend_optimum_of_the_grid_on_short_settings(short_run):
