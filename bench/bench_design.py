@@ -407,7 +407,7 @@ def resummarise(path: Path):
     for p in results["problems"]:
         runs = {m: d["runs"] for m, d in p["methods"].items()}
         p.update(summarise(runs, {m: d["compile_s"] for m, d in p["methods"].items()}))
-    path.write_text(json.dumps(results, indent=1))
+    path.write_text(json.dumps(results, separators=(",", ":")))
     plot(results, path.with_suffix(".png"))
 
 
@@ -504,7 +504,8 @@ def main(argv=None):
         print(f"   best {best:.6g}; speedup vs best gradient-free {speedup}", flush=True)
     results["load_average_end"] = os.getloadavg()
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=1, default=lambda o: None if o is None else float(o)))
+    # compact: the traces hold every evaluation (hundreds of thousands of numbers)
+    args.out.write_text(json.dumps(results, separators=(",", ":"), default=lambda o: None if o is None else float(o)))
     plot(results, args.out.with_suffix(".png"))
     print(f"wrote {args.out}")
 

@@ -4,7 +4,10 @@ The run directory gets ``optimize.toml`` (the resolved settings; ``--resume``
 reads it back), ``checkpoint.npz`` and ``history.csv`` (after every iteration),
 ``history.png`` (the paper's Fig. 11), ``grid.csv`` and ``landscape.png`` (the
 vmap grid over the box with the optimiser's path; two-variable problems) and
-``result.json`` (start and final design, reduction in percent, grid best).
+``result.json`` (start and final design, reduction in percent, grid best). With
+``--starts N`` (N > 1) each start runs in ``start_NNN/`` (its own checkpoint and
+history) and ``multistart.json`` lists the starts; the top-level files describe the
+best run (:func:`optim.optimize.multistart`).
 
 The optimiser's compiled programs are kept in a cache folder (:mod:`jaxcrank.cache`;
 ``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
@@ -16,6 +19,7 @@ Config TOML (every key optional)::
     [optimizer]                  # optim.optimize.Settings fields
     method = "adam"
     max_iterations = 30
+    starts = 1                   # > 1: the best of several starts (Sobol points, seed)
     [objective]                  # optim.objective.Objective fields
     t_end = 0.3
     [design]                     # override the problem's variables

@@ -443,3 +443,27 @@ def test_optimize_cli_writes_history_figures_and_result(tmp_path):
     # --resume reads the run's own optimize.toml
     assert main(["optimize", "--out", str(out), "--resume", "--iterations", "3", "--grid", "0", "--quiet"]) == 0
     assert json.loads((out / "result.json").read_text())["iterations"] == 3
+
+
+def test_optimize_cli_with_several_starts_writes_each_start_and_the_best(tmp_path):
+    import json
+
+    from jaxcrank.cli import main
+
+    cfg = tmp_path / "opt.toml"
+    cfg.write_text(
+        'problem = "paper"\n[optimizer]\nmax_iterations = 2\n[objective]\nt_start = 0.0\nt_end = 0.002\n'
+        'method = "pathwise"\n'
+    )
+    out = tmp_path / "run"
+    assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--grid", "0", "--quiet"]) == 0
+    result = json.loads((out / "result.json").read_text())
+    finals = [r["final_objective"] for r in result["starts"]]
+    assert len(finals) == 3 and result["final_objective_deg"] == min(finals) == finals[result["best_start"]]
+    for k in range(3):
+        assert (out / f"start_{k:03d}" / "checkpoint.npz").exists()
+    assert (out / "multistart.json").exists() and (out / "history.png").exists()
+    # the run's own optimize.toml records the starts; --resume finishes without new work
+    assert main(["optimize", "--out", str(out), "--resume", "--grid", "0", "--quiet"]) == 0
+    assert json.loads((out / "result.json").read_text())["starts"] == result["starts"]
+    assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--quiet"]) == 2
