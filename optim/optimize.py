@@ -381,7 +381,16 @@ def multistart(
                     f"{plan}: the run was made from other start designs (starts, seed or problem differ)"
                 )
         out.mkdir(parents=True, exist_ok=True)
+
+    def record(runs):
+        if plan is not None:  # written before the first start too: a killed run is never overwritten
+            tmp = plan.with_suffix(".tmp")
+            tmp.write_text(json.dumps({"start_unit": points.tolist(), "seed": settings.seed, "runs": runs}, indent=1))
+            tmp.replace(plan)
+
     results, runs = [], []
+    if plan is not None and not plan.exists():
+        record(runs)
     for k, u in enumerate(points):
         x0 = tuple(float(v) for v in np.asarray(problem.from_unit(jnp.asarray(u))))
         run_dir = None if out is None else out / f"start_{k:03d}"
@@ -397,10 +406,7 @@ def multistart(
                 "iterations": len(res["history"]),
             }
         )
-        if plan is not None:
-            tmp = plan.with_suffix(".tmp")
-            tmp.write_text(json.dumps({"start_unit": points.tolist(), "seed": settings.seed, "runs": runs}, indent=1))
-            tmp.replace(plan)
+        record(runs)
     best = int(np.argmin([r["final_objective"] for r in runs]))
     return {**results[best], "runs": runs, "best_start": best}
 

@@ -59,14 +59,14 @@ PARAMETERS = (
 )
 
 
-def deviations(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, "n 4"]:
+def deviations(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, "n 6"]:
     """Per-sample signals behind :data:`METRICS` (deviations from the ideal mechanism
     and the contact forces), shape (n, 6), in that order and in their units
     (deg, m, m, N m, N, N)."""
     return jax.vmap(lambda t, y: metrics.rms_signals(model.evaluate(mech, t, y)))(ts, ys)
 
 
-def metric_values(sim: Simulation) -> Float[Array, " 4"]:
+def metric_values(sim: Simulation) -> Float[Array, " 6"]:
     """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
     :mod:`jaxcrank.tracking`), shape (6,), in their units."""
     return jnp.stack([sim.metrics[k] for k in METRICS])
