@@ -114,8 +114,8 @@ def programs(problem: Problem, penalty: float = 10.0):
         penalty: weight of L-BFGS's out-of-set penalty.
 
     Returns ``(value_and_grad, extended)``: ``value_and_grad(u, f0) -> (value, grad (n,))``
-    inside the feasible set (forward or reverse mode, as the objective says) and
-    L-BFGS's extension ``extended(u, f0) -> value`` beyond it. Each is traced and
+    inside the feasible set (forward or reverse mode, as the objective says) and the
+    same for L-BFGS's extension beyond it, ``extended(u, f0) -> (value, grad (n,))``. Each is traced and
     compiled at its first call, or loaded from :mod:`jaxcrank.cache` when that is
     enabled and an earlier process stored it. A failed evaluation is NaN
     (``Objective.on_failure = "nan"`` and :func:`jaxcrank.cache.checks_as_nan`: no
@@ -132,10 +132,32 @@ def programs(problem: Problem, penalty: float = 10.0):
 
     args = (jax.ShapeDtypeStruct((problem.n,), jnp.float64), jax.ShapeDtypeStruct((), jnp.float64))
     vg = value_and_grad(inside, forward_mode(problem.objective))
+    vg_outside = value_and_grad(outside, forward_mode(problem.objective))
     return (
         _Lazy(lambda: cache.exported(vg, ("optim.value_and_grad", problem), *args)),
-        _Lazy(lambda: cache.exported(outside, ("optim.extended", problem, penalty), *args)),
+        _Lazy(lambda: cache.exported(vg_outside, ("optim.extended_value_and_grad", problem, penalty), *args)),
     )
+
+
+def _line_function(extended, f0):
+    """L-BFGS's line-search function ``u -> value`` of the extension: optax's zoom line
+    search traces it and differentiates it with ``jax.value_and_grad``; the gradient
+    comes from the ``extended`` program itself (forward or reverse mode, as the objective
+    says), so an objective differentiated in forward mode works there too."""
+
+    @jax.custom_vjp
+    def line(u):
+        return extended(u, f0)[0]
+
+    def forward(u):
+        value, grad = extended(u, f0)
+        return value, grad
+
+    def backward(grad, cotangent):
+        return (cotangent * grad,)
+
+    line.defvjp(forward, backward)
+    return line
 
 
 class _Lazy:
@@ -157,9 +179,13 @@ class _Lazy:
 
 
 def _strong(args):
-    # float64 numpy arrays: a Python float or a weakly typed array would make jit compile
-    # the same program a second time for the other argument type
-    return [np.asarray(a, dtype=np.float64) for a in args]
+    # float64 arrays: a Python float or a weakly typed array would make jit compile the
+    # same program a second time for the other argument type (tracers, e.g. inside the
+    # L-BFGS line search, stay tracers)
+    return [
+        jnp.asarray(a, dtype=jnp.float64) if isinstance(a, jax.core.Tracer) else np.asarray(a, dtype=np.float64)
+        for a in args
+    ]
 
 
 def _checked(problem: Problem, u, value, grad):
@@ -270,7 +296,7 @@ def optimize(
         if settings.method == "adam":
             updates, state = opt.update(grad, state, u)
         else:
-            updates, state = opt.update(grad, state, u, value=value, grad=grad, value_fn=lambda v: extended(v, f0))
+            updates, state = opt.update(grad, state, u, value=value, grad=grad, value_fn=_line_function(extended, f0))
         u_new = problem.project(optax.apply_updates(u, updates))
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))

@@ -467,3 +467,19 @@ def test_optimize_cli_with_several_starts_writes_each_start_and_the_best(tmp_pat
     assert main(["optimize", "--out", str(out), "--resume", "--grid", "0", "--quiet"]) == 0
     assert json.loads((out / "result.json").read_text())["starts"] == result["starts"]
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--quiet"]) == 2
+
+
+@pytest.mark.parametrize("objective", ["pathwise", "ensemble_forward"])
+def test_lbfgs_runs_with_pathwise_and_forward_mode_objectives(objective):
+    """L-BFGS's zoom line search differentiates the extended objective with
+    jax.value_and_grad; the gradient comes from the optimiser's own program, so a
+    forward-mode ensemble objective (the default) works there as well as a pathwise one.
+    Two iterations, finite values, the iterates in the box."""
+    obj = CHEAP if objective == "pathwise" else dataclasses.replace(SHORT, windows=2)
+    prob = paper_problem(obj)
+    res = optimize(prob, Settings(method="lbfgs", max_iterations=2, gtol=0.0, xtol=0.0), progress=False)
+    assert len(res["history"]) == 2
+    for h in res["history"]:
+        assert np.isfinite(h["objective_deg"])
+        x = np.array([h[f"{n}_SI"] for n in prob.names])
+        assert bool(prob.feasible(x))
