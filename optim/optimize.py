@@ -139,25 +139,36 @@ def programs(problem: Problem, penalty: float = 10.0):
     )
 
 
-def _line_function(extended, f0):
-    """L-BFGS's line-search function ``u -> value`` of the extension: optax's zoom line
-    search traces it and differentiates it with ``jax.value_and_grad``; the gradient
-    comes from the ``extended`` program itself (forward or reverse mode, as the objective
-    says), so an objective differentiated in forward mode works there too."""
+@functools.lru_cache(maxsize=8)
+def _lbfgs_update(settings: Settings, extended):
+    """L-BFGS's update step ``(grad, state, u, value, f0) -> (updates, state)`` for the
+    extension program ``extended`` (:func:`programs`), jitted once per program and
+    settings: optax's zoom line search traces the objective inside a while loop, which
+    compiled eagerly would compile the whole objective again at every iteration.
+
+    The line search differentiates its function with ``jax.value_and_grad``; the
+    gradient comes from ``extended`` itself (forward or reverse mode, as the objective
+    says) through a custom VJP, so a forward-mode objective works there too."""
+    opt = _optimizer(settings)
 
     @jax.custom_vjp
-    def line(u):
+    def line(u, f0):
         return extended(u, f0)[0]
 
-    def forward(u):
+    def forward(u, f0):
         value, grad = extended(u, f0)
         return value, grad
 
     def backward(grad, cotangent):
-        return (cotangent * grad,)
+        return cotangent * grad, jnp.zeros(())
 
     line.defvjp(forward, backward)
-    return line
+
+    @jax.jit
+    def update(grad, state, u, value, f0):
+        return opt.update(grad, state, u, value=value, grad=grad, value_fn=lambda v: line(v, f0))
+
+    return update
 
 
 class _Lazy:
@@ -296,7 +307,7 @@ def optimize(
         if settings.method == "adam":
             updates, state = opt.update(grad, state, u)
         else:
-            updates, state = opt.update(grad, state, u, value=value, grad=grad, value_fn=_line_function(extended, f0))
+            updates, state = _lbfgs_update(settings, extended)(grad, state, u, value, jnp.asarray(f0, jnp.float64))
         u_new = problem.project(optax.apply_updates(u, updates))
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))

@@ -469,7 +469,7 @@ def test_optimize_cli_with_several_starts_writes_each_start_and_the_best(tmp_pat
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--quiet"]) == 2
 
 
-@pytest.mark.parametrize("objective", ["pathwise", "ensemble_forward"])
+@pytest.mark.parametrize("objective", [pytest.param("pathwise", marks=pytest.mark.slow), "ensemble_forward"])
 def test_lbfgs_runs_with_pathwise_and_forward_mode_objectives(objective):
     """L-BFGS's zoom line search differentiates the extended objective with
     jax.value_and_grad; the gradient comes from the optimiser's own program, so a
