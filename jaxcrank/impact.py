@@ -152,6 +152,22 @@ class WallImpact(NamedTuple):
     since_separation: float
 
 
+def _wall_impact(mech: Mechanism, sol, onset: float, since_separation: float, what: str) -> WallImpact:
+    """The :class:`WallImpact` of the impact of ``sol`` (a :func:`_solve_wall` solution)
+    that starts at ``onset`` (s) and must have ended by the end of the run (else
+    RuntimeError naming ``what``)."""
+    y_on = np.asarray(sol.evaluate(onset))
+    y1 = np.asarray(sol.ys[-1])
+    if _penetration(mech, y1) >= 0.0:
+        raise RuntimeError(f"{what} had not ended at the end of the run")
+    return WallImpact(
+        restitution=-(y1[1] - y1[3]) / (y_on[1] - y_on[3]),
+        approach_speed=float(y_on[1] - y_on[3]),
+        memory_at_onset=float(y_on[4]),
+        since_separation=since_separation,
+    )
+
+
 def reimpact(
     mech: Mechanism,
     approach_speed: Float[ArrayLike, ""] = 0.5,
@@ -183,16 +199,7 @@ def reimpact(
     t1 = t_a + ramp + 200e-6 + 3e-3 * (0.5 / second_speed) ** 0.2
     sol = _solve_wall(mech, pin_mass, breaks, [hole_speed / ramp], y0, t1, rtol, atol)
     onset = [t for t in _crossings(mech, sol, t_sep + 1e-9, t1) if t > t_sep][0]
-    y_on = np.asarray(sol.evaluate(onset))
-    y1 = np.asarray(sol.ys[-1])
-    if _penetration(mech, y1) >= 0.0:
-        raise RuntimeError("the second impact had not ended at the end of the run")
-    return WallImpact(
-        restitution=-(y1[1] - y1[3]) / (y_on[1] - y_on[3]),
-        approach_speed=float(y_on[1] - y_on[3]),
-        memory_at_onset=float(y_on[4]),
-        since_separation=float(onset - t_sep),
-    )
+    return _wall_impact(mech, sol, onset, float(onset - t_sep), "the second impact")
 
 
 def slow_approach(
@@ -220,13 +227,4 @@ def slow_approach(
     y0 = np.array([c - gap0, v_a, 0.0, 0.0, v_a])
     t1 = t_on + 3e-3 * (0.5 / approach_speed) ** 0.2
     sol = _solve_wall(mech, pin_mass, [pre, t_on], [deceleration], y0, t1, rtol, atol)
-    y_on = np.asarray(sol.evaluate(t_on))
-    y1 = np.asarray(sol.ys[-1])
-    if _penetration(mech, y1) >= 0.0:
-        raise RuntimeError("the impact had not ended at the end of the run")
-    return WallImpact(
-        restitution=-(y1[1] - y1[3]) / (y_on[1] - y_on[3]),
-        approach_speed=float(y_on[1] - y_on[3]),
-        memory_at_onset=float(y_on[4]),
-        since_separation=float("inf"),
-    )
+    return _wall_impact(mech, sol, t_on, float("inf"), "the impact")

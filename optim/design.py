@@ -51,9 +51,8 @@ import numpy as np
 
 from jaxcrank.metrics import RMS_METRICS
 from jaxcrank.params import ParameterError, get_parameter, paper, set_parameters
-from jaxcrank.solve import simulate
 
-from .objective import Objective, over_windows, tracked_solve, window_starts, windows_ok
+from .objective import Objective, over_windows, stored_solve, tracked_solve, window_starts, windows_ok
 from .problem import Problem
 from .sensitivity import deviations, window_sums
 
@@ -303,17 +302,10 @@ class DesignProblem(Problem):
         whether the solve succeeded (``throw=False``: failures reported, not raised)."""
         obj = self.objective
         grid = obj.grid(self.base)
-        sim, n_start = self._solve(self.mechanism(x), grid, throw)
+        sim, n_start = stored_solve(self.mechanism(x), obj, throw, grid)
         late = slice(n_start + 1, None)
         vals = _terms(jnp.mean(deviations(sim.mechanism, sim.ts[late], sim.ys[late]) ** 2, axis=0))
         return vals, sim.ok & jnp.all(jnp.isfinite(vals))
-
-    def _solve(self, mech, grid, throw):
-        obj = self.objective
-        n_start, n_eval, _, dt = grid
-        ts = dt * jnp.arange(n_start + n_eval + 1)
-        sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=throw)
-        return sim, n_start
 
     def objective_value(self, x, method: str | None = None):
         """Total objective at SI design ``x``, degrees: ``sum_i w_i term_i + cost``.

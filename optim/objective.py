@@ -153,10 +153,17 @@ def eval_samples(mech: Mechanism, obj: Objective, throw: bool, grid) -> tuple[Si
     concrete) that stores every sample, for the pathwise method's reverse-mode
     gradient: the simulation, the sample index of t_start and the
     transmission-angle errors (deg) at the samples in (t_start, t_end]."""
+    sim, n_start = stored_solve(mech, obj, throw, grid)
+    return sim, n_start, transmission_angle_error(mech, sim.ts[n_start + 1 :], sim.ys[n_start + 1 :])
+
+
+def stored_solve(mech: Mechanism, obj: Objective, throw: bool, grid) -> tuple[Simulation, int]:
+    """One solve from the pins-centred start that stores every sample of the objective's
+    ``grid`` (:meth:`Objective.grid`): the simulation and the sample index of t_start
+    (the samples in (t_start, t_end] follow it). Differentiable in reverse mode."""
     n_start, n_eval, _, dt = grid
     ts = dt * jnp.arange(n_start + n_eval + 1)
-    sim = simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=throw)
-    return sim, n_start, transmission_angle_error(mech, sim.ts[n_start + 1 :], sim.ys[n_start + 1 :])
+    return simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=throw), n_start
 
 
 def pathwise_errors(mech: Mechanism, obj: Objective = Objective()) -> tuple[Float[Array, " eval"], Bool[Array, ""]]:

@@ -150,11 +150,14 @@ def test_a_window_over_its_step_budget_is_left_out_not_nan():
     assert float(d_forward) == pytest.approx(expected, rel=1e-8)
 
 
+# kvaerno5 needs ~75 000 steps (accepted + rejected) for the second window at rtol 1e-8,
+# where rodas4 (the default) needs ~500 and tsit5 ~370. rodas4 was a strict expected
+# failure (3.9e-4) while XLA contracted to FMA: the checkpointed adjoint's recomputed
+# steps rounded differently from the forward solve (jaxcrank.runtime)
 @pytest.mark.long
 @pytest.mark.slow
-def test_ensemble_gradient_with_kvaerno5_matches_central_differences():
-    # kvaerno5 needs ~75 000 steps (accepted + rejected) for the second window at
-    # rtol 1e-8, where rodas4 needs ~500 and tsit5 ~370
+@pytest.mark.parametrize("solver, window_max_steps", [("kvaerno5", 150_000), ("rodas4", 50_000)])
+def test_ensemble_gradient_with_implicit_window_solvers_matches_central_differences(solver, window_max_steps):
     _estimator_matches_central_differences(
         O.Objective(
             t_start=0.02,
@@ -162,26 +165,8 @@ def test_ensemble_gradient_with_kvaerno5_matches_central_differences():
             window=1e-3,
             rtol=1e-8,
             atol=1e-8,
-            window_max_steps=150_000,
-            window_solver="kvaerno5",
-        )
-    )
-
-
-@pytest.mark.long
-@pytest.mark.slow
-def test_ensemble_gradient_with_the_default_rodas4_matches_central_differences():
-    # was a strict expected failure (3.9e-4) while XLA contracted to FMA: the checkpointed
-    # adjoint's recomputed steps rounded differently from the forward solve (jaxcrank.runtime)
-    _estimator_matches_central_differences(
-        O.Objective(
-            t_start=0.02,
-            t_end=0.022,
-            window=1e-3,
-            rtol=1e-8,
-            atol=1e-8,
-            window_max_steps=50_000,
-            window_solver="rodas4",
+            window_max_steps=window_max_steps,
+            window_solver=solver,
         )
     )
 
