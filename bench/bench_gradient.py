@@ -5,7 +5,7 @@
 On the paper problem (L1, L2) with the objective's defaults (evaluation window
 (0.1, 0.3] s, 25 ensemble windows of 2 ms), each configuration runs in a new Python
 process with an empty cache folder, then again in another new process with the
-folder the first one filled (:mod:`jaxcrank.cache`):
+folder the first one filled (:mod:`jaxcrank.runs.cache`):
 
 - ``ready_s``: from the process's start (the parent's clock, just before it starts
   Python) until the value-and-gradient program is compiled or loaded;
@@ -87,7 +87,7 @@ def cli(folder: Path, out: Path, extra: list[str]) -> dict:
     """``jaxcrank optimize --grid 0`` in a new process: wall seconds, iterations, result."""
     tic = time.perf_counter()
     subprocess.run(
-        [sys.executable, "-m", "jaxcrank.cli", "optimize", "--grid", "0", "--quiet", "--out", str(out)]
+        [sys.executable, "-m", "jaxcrank.runs.cli", "optimize", "--grid", "0", "--quiet", "--out", str(out)]
         + ["--cache-dir", str(folder)]
         + extra,
         cwd=ROOT,

@@ -6,13 +6,13 @@
 
 The workload is a Monte Carlo of the paper design (clearances at B and C within
 +-0.05 mm, uniform), each part simulated as ``jaxcrank sweep`` does
-(:class:`jaxcrank.sweep.Settings`: ``--revolutions`` crank revolutions, by default
+(:class:`jaxcrank.runs.sweep.Settings`: ``--revolutions`` crank revolutions, by default
 the paper run of 0.4 s, tsit5 at rtol = atol = 1e-6, 0.1 deg output samples).
 Measured in one run, on this machine's CPU:
 
 - ``loop``: a Python loop over the designs, each one call of the same jitted
-  single-design function (:func:`jaxcrank.sweep.simulate_design`), the baseline;
-- ``batch``: :func:`jaxcrank.sweep.run` with ``chunk`` = each batch size on one
+  single-design function (:func:`jaxcrank.runs.sweep.simulate_design`), the baseline;
+- ``batch``: :func:`jaxcrank.runs.sweep.run` with ``chunk`` = each batch size on one
   device (chunk 1: each design solved alone; larger: one ``vmap`` per chunk);
 - ``devices``: the largest batch size on 1, 2, ... host devices (each count in a
   fresh process with ``--xla_force_host_platform_device_count``; the sweep shards

@@ -1,4 +1,4 @@
-"""Benchmark: metrics tracked during the solve (jaxcrank.tracking) against the
+"""Benchmark: metrics tracked during the solve (jaxcrank.numerics.tracking) against the
 same solve with stored samples, on the paper run.
 
     python bench/bench_tracking.py [--t1 0.4] [--out bench/results/tracking.json]

@@ -35,7 +35,7 @@ from _common import machine  # bench/ is on sys.path (python bench/stiffness.py)
 
 import jaxcrank as jc
 from jaxcrank import model, solve
-from jaxcrank.params import set_parameter
+from jaxcrank.physics.params import set_parameter
 
 
 def tsit5_real_stability_limit() -> float:

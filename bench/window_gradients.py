@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxcrank import simulate
-from jaxcrank.outputs import transmission_angle_error
+from jaxcrank.analysis.outputs import transmission_angle_error
 from optim import objective as O
 from optim.problem import paper_problem
 

@@ -1,23 +1,34 @@
 """jaxcrank: a differentiable simulator of slider-crank mechanisms with joint clearances.
 
-The public API is what ``__all__`` lists; the submodules (``laws``, ``model``,
-``ideal``, ``metrics``, ``outputs``, ``sampling``, ``sweep``, ``spec``, ``config``)
-are documented in the API reference.
+The public API is what ``__all__`` lists. The modules live in four layers, each
+importing only from the ones before it (one exception: the numerics' ``tracking``
+reads the metric definitions of ``analysis.metrics``, which need the physics alone):
+
+- ``jaxcrank.physics``: ``params``, ``laws``, ``ideal``, ``model``, ``reference``;
+- ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``;
+- ``jaxcrank.analysis``: ``metrics``, ``outputs``, ``impact``, ``audit``;
+- ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
+
+Each module is also reachable by its short name (``jaxcrank.outputs``,
+``from jaxcrank import sweep``); those not imported here load on first use.
 """
 
 from importlib.metadata import PackageNotFoundError, version
 
 import jax
 
-from . import runtime
+from .numerics import runtime
 
 runtime.configure()  # before anything starts JAX's backend: XLA reads XLA_FLAGS once
 jax.config.update("jax_enable_x64", True)
 
-from . import config, ideal, laws, metrics, model, outputs, sampling  # noqa: E402
+from .analysis import metrics, outputs  # noqa: E402
 from .errors import CorruptFileError  # noqa: E402
-from .laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
-from .params import (  # noqa: E402
+from .numerics import solve  # noqa: E402
+from .numerics.solve import DEFAULTS, SOLVERS, Simulation, SimulationError, SolveOptions, simulate  # noqa: E402
+from .physics import ideal, laws, model, params  # noqa: E402
+from .physics.laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
+from .physics.params import (  # noqa: E402
     Contact,
     Friction,
     Joint,
@@ -27,7 +38,31 @@ from .params import (  # noqa: E402
     paper,
     with_clearance,
 )
-from .solve import DEFAULTS, SOLVERS, Simulation, SimulationError, SolveOptions, simulate  # noqa: E402
+from .runs import config, sampling  # noqa: E402
+
+#: Short names of the modules that ``import jaxcrank`` does not load: each loads on first use.
+_LAZY = {
+    "reference": "physics",
+    "linalg": "numerics",
+    "rosenbrock": "numerics",
+    "tracking": "numerics",
+    "impact": "analysis",
+    "audit": "analysis",
+    "sweep": "runs",
+    "spec": "runs",
+    "cache": "runs",
+    "plots": "runs",
+    "cli": "runs",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return importlib.import_module(f"{__name__}.{_LAZY[name]}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 try:
     __version__ = version("jaxcrank")
@@ -56,8 +91,10 @@ __all__ = [
     "model",
     "outputs",
     "paper",
+    "params",
     "sampling",
     "simulate",
+    "solve",
     "with_clearance",
     "__version__",
 ]

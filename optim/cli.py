@@ -9,7 +9,7 @@ vmap grid over the box with the optimiser's path; two-variable problems) and
 history) and ``multistart.json`` lists the starts; the top-level files describe the
 best run (:func:`optim.optimize.multistart`).
 
-The optimiser's compiled programs are kept in a cache folder (:mod:`jaxcrank.cache`;
+The optimiser's compiled programs are kept in a cache folder (:mod:`jaxcrank.runs.cache`;
 ``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
 loads them instead of tracing and compiling again.
 
@@ -51,7 +51,7 @@ import tomli_w
 
 from jaxcrank import cache, reference
 from jaxcrank import config as mech_config
-from jaxcrank.params import ParameterError
+from jaxcrank.physics.params import ParameterError
 
 from .objective import Objective
 from .optimize import METHODS, Settings, multistart, optimize

@@ -49,8 +49,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxcrank.metrics import RMS_METRICS
-from jaxcrank.params import ParameterError, get_parameter, paper, set_parameters
+from jaxcrank.analysis.metrics import RMS_METRICS
+from jaxcrank.physics.params import ParameterError, get_parameter, paper, set_parameters
 
 from .objective import Objective, over_windows, stored_solve, tracked_solve, window_starts, windows_ok
 from .problem import Problem
@@ -122,7 +122,7 @@ def _safe_sqrt(x):
 
 def _terms(mean_squares):
     """The :data:`TERMS` values, (5,), from the mean squares of the signals of
-    :data:`jaxcrank.metrics.RMS_METRICS` (:func:`optim.sensitivity.deviations`' columns:
+    :data:`jaxcrank.analysis.metrics.RMS_METRICS` (:func:`optim.sensitivity.deviations`' columns:
     deg, m, m, N m and the contact forces at B and C, N)."""
     ms = mean_squares
     return _safe_sqrt(jnp.concatenate([ms[:4], 0.5 * (ms[4:5] + ms[5:6])]))
@@ -143,7 +143,7 @@ class DesignProblem(Problem):
 
     Variable names: ``rod_length`` and ``min_transmission_angle`` (both required),
     ``rod_inertia_ratio`` (optional, then ``rod_inertia`` is derived), and any other
-    name :func:`jaxcrank.params.set_parameter` accepts except ``crank_length``,
+    name :func:`jaxcrank.physics.params.set_parameter` accepts except ``crank_length``,
     ``offset``, ``rod_inertia`` and ``crank_speed`` (derived or fixing the sample grid).
 
     In :func:`optim.optimize.optimize`'s history, ``rms_error_deg`` is the objective

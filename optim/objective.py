@@ -48,9 +48,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, Real
 
 from jaxcrank import laws, model
-from jaxcrank.outputs import transmission_angle_error
-from jaxcrank.params import Mechanism, ParameterError
-from jaxcrank.solve import DEFAULTS, Simulation, simulate
+from jaxcrank.analysis.outputs import transmission_angle_error
+from jaxcrank.numerics.solve import DEFAULTS, Simulation, simulate
+from jaxcrank.physics.params import Mechanism, ParameterError
 
 
 class Objective(eqx.Module):
@@ -84,8 +84,8 @@ class Objective(eqx.Module):
             or ``"nan"`` (the value is NaN instead, and the program holds no host
             callback, so JAX's persistent compilation cache can store it; the caller
             must check, as :func:`optim.optimize.optimize` does).
-        rtol, atol: solver tolerances on the scaled state (default: :data:`jaxcrank.solve.DEFAULTS`).
-        max_steps: step budget of the long solve (default: :data:`jaxcrank.solve.DEFAULTS`).
+        rtol, atol: solver tolerances on the scaled state (default: :data:`jaxcrank.numerics.solve.DEFAULTS`).
+        max_steps: step budget of the long solve (default: :data:`jaxcrank.numerics.solve.DEFAULTS`).
     """
 
     t_start: float = eqx.field(static=True, default=0.1)
@@ -214,7 +214,7 @@ def tracked_solve(mech: Mechanism, obj: Objective, throw: bool, grid) -> Simulat
     """One solve from the pins-centred start over the objective's sample ``grid``
     (:meth:`Objective.grid`) that stores the state only at the ensemble windows'
     starts (:func:`window_start_indices`) and tracks the RMS metrics over the samples
-    in (t_start, t_end] during the solve (:mod:`jaxcrank.tracking`): memory independent
+    in (t_start, t_end] during the solve (:mod:`jaxcrank.numerics.tracking`): memory independent
     of the number of samples. Forward mode only (no reverse-mode gradient through it)."""
     n_start, n_eval, _, dt = grid
     ts = dt * np.arange(n_start + n_eval + 1)

@@ -44,8 +44,8 @@ from tqdm.auto import tqdm
 
 from jaxcrank import cache
 from jaxcrank.errors import CorruptFileError
-from jaxcrank.params import ParameterError
-from jaxcrank.solve import SimulationError
+from jaxcrank.numerics.solve import SimulationError
+from jaxcrank.physics.params import ParameterError
 
 from .objective import forward_mode, value_and_grad
 from .problem import Problem
@@ -82,7 +82,7 @@ class Settings:
     seed: int = 0
 
     def __post_init__(self):
-        from jaxcrank.params import ParameterError
+        from jaxcrank.physics.params import ParameterError
 
         if self.method not in METHODS:
             raise ParameterError(f"optimiser method {self.method!r} is unknown; valid: {', '.join(METHODS)}")
@@ -116,9 +116,9 @@ def programs(problem: Problem, penalty: float = 10.0):
     Returns ``(value_and_grad, extended)``: ``value_and_grad(u, f0) -> (value, grad (n,))``
     inside the feasible set (forward or reverse mode, as the objective says) and the
     same for L-BFGS's extension beyond it, ``extended(u, f0) -> (value, grad (n,))``. Each is traced and
-    compiled at its first call, or loaded from :mod:`jaxcrank.cache` when that is
+    compiled at its first call, or loaded from :mod:`jaxcrank.runs.cache` when that is
     enabled and an earlier process stored it. A failed evaluation is NaN
-    (``Objective.on_failure = "nan"`` and :func:`jaxcrank.cache.checks_as_nan`: no
+    (``Objective.on_failure = "nan"`` and :func:`jaxcrank.runs.cache.checks_as_nan`: no
     host callback in the programs, so they can be cached); :func:`optimize` checks.
     """
     problem = dataclasses.replace(problem, objective=dataclasses.replace(problem.objective, on_failure="nan"))

@@ -20,8 +20,8 @@ import numpy as np
 import optax
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from jaxcrank.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
-from jaxcrank.sampling import Tolerance, monte_carlo
+from jaxcrank.physics.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
+from jaxcrank.runs.sampling import Tolerance, monte_carlo
 
 from .objective import Objective, forward_mode, value, value_and_grad
 
@@ -44,7 +44,7 @@ class Problem:
             ``(name, tolerance, distribution)`` per parameter: the part's value is the
             design's (or the base's) value plus a deviation within ``+-tolerance`` (SI),
             ``"uniform"`` over the band or ``"normal"`` with the band as +-3 sigma
-            (:class:`jaxcrank.sampling.Tolerance`).
+            (:class:`jaxcrank.runs.sampling.Tolerance`).
         samples: number of manufactured parts the robust objective averages over
             (0: the nominal design alone). With ``samples > 0`` the Eq. 19 part of the
             objective is the Monte Carlo mean over ``samples`` parts, the same draws at
@@ -186,7 +186,7 @@ class Problem:
 
     def draws(self) -> Float[np.ndarray, "samples scatter"]:
         """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI:
-        the Monte Carlo draws of :func:`jaxcrank.sampling.monte_carlo` about a zero nominal."""
+        the Monte Carlo draws of :func:`jaxcrank.runs.sampling.monte_carlo` about a zero nominal."""
         if not self.scatter:
             return np.zeros((self.samples, 0))
         tolerances = {name: Tolerance(0.0, tol, dist) for name, tol, dist in self.scatter}

@@ -21,7 +21,7 @@ import numpy as np
 from jaxtyping import ArrayLike, Bool, Float
 from tqdm.auto import tqdm
 
-from jaxcrank.params import ParameterError
+from jaxcrank.physics.params import ParameterError
 
 from .objective import pathwise_errors
 from .problem import Problem

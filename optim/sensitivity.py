@@ -2,7 +2,7 @@
 
 ``sensitivities(mech)`` gives, at one design, the value of each metric in
 :data:`METRICS` and its gradient with respect to every parameter in ``names``
-(any name :func:`jaxcrank.params.set_parameter` accepts), plus the normalised
+(any name :func:`jaxcrank.physics.params.set_parameter` accepts), plus the normalised
 elasticities ``(dm/dp) (p / m)`` (percent change of the metric per percent change
 of the parameter), which :func:`optim.plots.plot_tornado` draws as a tornado chart.
 
@@ -20,7 +20,7 @@ Valid for: time averages of squares, i.e. the RMS metrics (transmission-angle
 error, rod-centre and slider x deviation, driving-moment deviation, contact forces
 at B and C). Not valid for: peaks (largest contact force, largest deviation,
 largest acceleration): an extreme value over chaotic impacts has no trend-following
-local derivative (use a sweep over a band, :mod:`jaxcrank.sweep`, for those).
+local derivative (use a sweep over a band, :mod:`jaxcrank.runs.sweep`, for those).
 """
 
 from __future__ import annotations
@@ -33,13 +33,13 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from jaxcrank import metrics, model
-from jaxcrank.params import Mechanism, get_parameter, parameter_unit, set_parameters
-from jaxcrank.solve import Simulation
+from jaxcrank.numerics.solve import Simulation
+from jaxcrank.physics.params import Mechanism, get_parameter, parameter_unit, set_parameters
 
 from .objective import Objective, forward_mode, solve_window, tracked_solve, window_starts
 
 #: metrics whose gradient the ensemble estimate follows: the RMS metrics of
-#: :mod:`jaxcrank.metrics` (units in the suffix)
+#: :mod:`jaxcrank.analysis.metrics` (units in the suffix)
 METRICS = metrics.RMS_METRICS
 
 #: default parameters: the physical design and operating parameters (not the smoothing widths)
@@ -68,7 +68,7 @@ def deviations(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike,
 
 def metric_values(sim: Simulation) -> Float[Array, " 6"]:
     """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
-    :mod:`jaxcrank.tracking`), shape (6,), in their units."""
+    :mod:`jaxcrank.numerics.tracking`), shape (6,), in their units."""
     return jnp.stack([sim.metrics[k] for k in METRICS])
 
 

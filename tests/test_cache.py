@@ -1,4 +1,4 @@
-"""Compiled programs outlive the process (jaxcrank.cache): a second process loads the
+"""Compiled programs outlive the process (jaxcrank.runs.cache): a second process loads the
 optimiser's value-and-gradient program instead of tracing and compiling it again."""
 
 from __future__ import annotations

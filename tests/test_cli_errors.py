@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 
-from jaxcrank.cli import main
+from jaxcrank.runs.cli import main
 
 
 def _one_line_error(capsys, code, *needles):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import tomli_w
 
-from jaxcrank.params import ParameterError
+from jaxcrank.physics.params import ParameterError
 from optim import cli
 from optim import objective as O
 from optim.design import DESIGN_VARIABLES, TERMS, DesignProblem, design_problem, geometry, ideal_stroke

@@ -30,7 +30,7 @@ from hypothesis import strategies as st
 import jaxcrank as jc
 from jaxcrank import cli, config, sweep
 from jaxcrank import spec as sweep_spec
-from jaxcrank.params import Mechanism, ParameterError
+from jaxcrank.physics.params import Mechanism, ParameterError
 
 from . import fuzz
 

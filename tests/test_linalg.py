@@ -1,4 +1,4 @@
-"""Small dense linear algebra of the implicit solvers (jaxcrank.linalg) against
+"""Small dense linear algebra of the implicit solvers (jaxcrank.numerics.linalg) against
 numpy's LAPACK-backed solves."""
 
 import jax
@@ -7,7 +7,7 @@ import lineax as lx
 import numpy as np
 import pytest
 
-from jaxcrank.linalg import DenseInverse, inverse
+from jaxcrank.numerics.linalg import DenseInverse, inverse
 
 
 def _matrices():

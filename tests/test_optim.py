@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from jaxcrank import paper
-from jaxcrank.params import ParameterError
+from jaxcrank.physics.params import ParameterError
 from optim import objective as O
 from optim import search
 from optim.optimize import Settings, multistart, optimize, programs, start_points
@@ -153,7 +153,7 @@ def test_a_window_over_its_step_budget_is_left_out_not_nan():
 # kvaerno5 needs ~75 000 steps (accepted + rejected) for the second window at rtol 1e-8,
 # where rodas4 (the default) needs ~500 and tsit5 ~370. rodas4 was a strict expected
 # failure (3.9e-4) while XLA contracted to FMA: the checkpointed adjoint's recomputed
-# steps rounded differently from the forward solve (jaxcrank.runtime)
+# steps rounded differently from the forward solve (jaxcrank.numerics.runtime)
 @pytest.mark.long
 @pytest.mark.slow
 @pytest.mark.parametrize("solver, window_max_steps", [("kvaerno5", 150_000), ("rodas4", 50_000)])
@@ -410,7 +410,7 @@ def test_ensemble_gradient_follows_the_least_squares_slope(design):
 def test_optimize_cli_writes_history_figures_and_result(tmp_path):
     import json
 
-    from jaxcrank.cli import main
+    from jaxcrank.runs.cli import main
 
     cfg = tmp_path / "opt.toml"
     cfg.write_text(
@@ -433,7 +433,7 @@ def test_optimize_cli_writes_history_figures_and_result(tmp_path):
 def test_optimize_cli_with_several_starts_writes_each_start_and_the_best(tmp_path):
     import json
 
-    from jaxcrank.cli import main
+    from jaxcrank.runs.cli import main
 
     cfg = tmp_path / "opt.toml"
     cfg.write_text(

@@ -12,7 +12,7 @@ import pytest
 
 import jaxcrank as jc
 from jaxcrank import model, outputs
-from jaxcrank.rosenbrock import Rodas4
+from jaxcrank.numerics.rosenbrock import Rodas4
 
 
 def _forced_pendulum(t, y, args):

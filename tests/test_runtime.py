@@ -1,4 +1,4 @@
-"""The XLA CPU setting applied at import (jaxcrank.runtime)."""
+"""The XLA CPU setting applied at import (jaxcrank.numerics.runtime)."""
 
 import os
 import platform
@@ -77,7 +77,7 @@ X86 = platform.machine().lower() in ("x86_64", "amd64")
 @pytest.mark.parametrize("solver", ["tsit5", "rodas4", pytest.param("kvaerno5", marks=pytest.mark.slow)])
 def test_solver_loop_is_one_kernel_in_this_process(solver):
     """The explicit default and both stiff solvers: no LAPACK call or matrix-product
-    fusion inside the loop (jaxcrank.linalg, rosenbrock._combine) keeps it on the
+    fusion inside the loop (jaxcrank.numerics.linalg, rosenbrock._combine) keeps it on the
     thunk runtime."""
     # conftest imports jaxcrank first, so the options are in force here ("user" when the
     # parent process, e.g. pytest-xdist's controller, already put them in XLA_FLAGS)

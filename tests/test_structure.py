@@ -9,7 +9,7 @@ import numpy as np
 
 import jaxcrank as jc
 from jaxcrank import metrics, outputs, sweep
-from jaxcrank.params import set_parameters
+from jaxcrank.physics.params import set_parameters
 from optim import sensitivity
 
 
@@ -29,8 +29,8 @@ def test_optim_imports_sampling_not_the_sweep_runner():
         "import optim.problem, optim.objective, optim.optimize, optim.sensitivity, "
         "optim.search, optim.scans, optim.plots, optim.cli"
     )
-    assert "jaxcrank.sampling" in loaded
-    assert "jaxcrank.sweep" not in loaded and "jaxcrank.spec" not in loaded
+    assert "jaxcrank.runs.sampling" in loaded
+    assert "jaxcrank.runs.sweep" not in loaded and "jaxcrank.runs.spec" not in loaded
 
 
 def test_summary_sweep_row_and_sensitivity_give_identical_metrics():

@@ -1,4 +1,4 @@
-"""Sweeps (jaxcrank.sweep): vmap equals a loop, failures are reported, a killed
+"""Sweeps (jaxcrank.runs.sweep): vmap equals a loop, failures are reported, a killed
 sweep resumes to the same table, several devices and processes give the same
 numbers as one. Short simulations (3 ms); all tests share one compiled batch."""
 
@@ -14,7 +14,7 @@ import pytest
 import jaxcrank as jc
 from jaxcrank import cli, metrics, outputs, sampling, sweep
 from jaxcrank import spec as sweep_spec
-from jaxcrank.params import ParameterError
+from jaxcrank.physics.params import ParameterError
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = sweep.Settings(revolutions=0.03, samples_per_revolution=1200, metrics_from_revolution=0.01, max_steps=20_000)
@@ -64,7 +64,7 @@ def test_vmap_equals_python_loop_through_impacts(table):
 
 def test_batch_size_does_not_change_a_design(table):
     """Batches of 2 and 3 designs give the same numbers for every design, wherever it
-    sits in its batch (no FMA contraction, jaxcrank.runtime: with it the same design
+    sits in its batch (no FMA contraction, jaxcrank.numerics.runtime: with it the same design
     rounded differently per lane and per batch size)."""
     three = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=3, progress=False)
     assert list(three["status"]) == list(table["status"])

@@ -1,4 +1,4 @@
-"""Metrics tracked during a solve (jaxcrank.tracking): the same numbers as stored
+"""Metrics tracked during a solve (jaxcrank.numerics.tracking): the same numbers as stored
 samples where they should be, peaks independent of the sampling, memory
 independent of the number of samples."""
 
@@ -9,7 +9,7 @@ import pytest
 
 import jaxcrank as jc
 from jaxcrank import metrics, outputs, sweep
-from jaxcrank.params import set_parameters
+from jaxcrank.physics.params import set_parameters
 
 
 def test_tracked_rms_equals_the_rms_of_stored_samples_and_peaks_do_not_depend_on_sampling():

@@ -19,8 +19,8 @@ import math
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from . import ideal
-from .model import Frame
+from ..physics import ideal
+from ..physics.model import Frame
 
 DEG = 180.0 / math.pi
 
@@ -73,7 +73,7 @@ METRICS = {
     "rms_contact_force_C_N": ("rms", "contact_force_C_N", "RMS normal contact force at C (bearing wear proxy)"),
 }
 
-#: the metrics that are maxima: over a solve, :mod:`jaxcrank.tracking` takes them at
+#: the metrics that are maxima: over a solve, :mod:`jaxcrank.numerics.tracking` takes them at
 #: every accepted step
 PEAK_METRICS = tuple(k for k, (reduction, _, _) in METRICS.items() if reduction in ("max_abs", "max"))
 
@@ -105,7 +105,7 @@ def transmission_angle_deviation(
 
 
 def signals(frame: Frame) -> dict[str, Float[Array, "*samples"]]:
-    """The per-sample signals of :data:`SIGNALS` from a :class:`jaxcrank.model.Frame`
+    """The per-sample signals of :data:`SIGNALS` from a :class:`jaxcrank.physics.model.Frame`
     (one instant, or arrays of them along a leading axis), SI units and degrees."""
     q, qi = frame.q, frame.ideal_q
     return {
@@ -139,8 +139,8 @@ def reduce_signal(reduction: str, x: Float[Array, " n"], window: Float[Array, " 
 
 
 def headline(frames: Frame, t_start: Float[ArrayLike, ""]) -> dict[str, Float[Array, ""]]:
-    """:data:`METRICS` over the samples of ``frames`` (a :class:`jaxcrank.model.Frame`
-    of arrays, e.g. :func:`jaxcrank.outputs.frames`) with time ``t > t_start`` (s).
+    """:data:`METRICS` over the samples of ``frames`` (a :class:`jaxcrank.physics.model.Frame`
+    of arrays, e.g. :func:`jaxcrank.analysis.outputs.frames`) with time ``t > t_start`` (s).
 
     Returns a dict of scalars in the units of each name. Traceable. A window without
     samples gives 0 for ``max_abs`` and ``rms`` metrics and -inf for ``max`` ones:

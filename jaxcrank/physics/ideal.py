@@ -6,7 +6,7 @@ y = e. Positions are closed form; velocities and accelerations are their exact
 time derivatives (forward-mode autodiff of the closed form, no finite
 differences). Inverse dynamics gives the joint reactions and the driving moment.
 
-All functions take a :class:`~jaxcrank.params.Mechanism` and a scalar time t (s);
+All functions take a :class:`~jaxcrank.physics.params.Mechanism` and a scalar time t (s);
 ``jax.vmap`` over t for trajectories.
 """
 
@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from . import linalg
+from ..numerics import linalg
 from .params import Mechanism
 
 
@@ -115,7 +115,7 @@ def reactions(
     a = jnp.stack(columns, axis=1)
     normal, rhs = a.T @ a, a.T @ residual
     # plain-op linear algebra: a LAPACK call would take a solver loop that evaluates
-    # outputs (jaxcrank.tracking) off XLA's one-kernel path
+    # outputs (jaxcrank.numerics.tracking) off XLA's one-kernel path
     lam = linalg.solve_2x2(normal, rhs) if len(columns) == 2 else linalg.inverse(normal) @ rhs
     f_b = lam[:2] if ideal_B else zero
     f_c = lam[-2:] if ideal_C else zero

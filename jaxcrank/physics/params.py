@@ -3,8 +3,8 @@
 Every number a user may sweep or differentiate is a pytree leaf (``jax.grad``,
 ``jax.vmap`` and optax act on a :class:`Mechanism` directly). Only choices that
 change the structure of the model are static: the contact and friction laws
-(leafless equinox Modules, :mod:`jaxcrank.laws`), and whether a joint is ideal (which changes the number of degrees of
-freedom).
+(leafless equinox Modules, :mod:`jaxcrank.physics.laws`), and whether a joint is
+ideal (which changes the number of degrees of freedom).
 
 All values are SI: metres, kilograms, seconds, radians, newtons, pascals.
 
@@ -117,9 +117,9 @@ class Contact(eqx.Module):
     """Normal contact law settings (model.md, "Normal contact force").
 
     Attributes:
-        law: the normal law, a :class:`jaxcrank.laws.AbstractContactLaw`
+        law: the normal law, a :class:`jaxcrank.physics.laws.AbstractContactLaw`
             (TOML/CLI names in ``laws.CONTACT_LAWS``). The default
-            :class:`~jaxcrank.laws.Hybrid` is the paper's Eq. 6-8 (Bai & Zhao 2012
+            :class:`~jaxcrank.physics.laws.Hybrid` is the paper's Eq. 6-8 (Bai & Zhao 2012
             stiffness with Eq. 5 damping).
         restitution: coefficient of restitution c_e in (0, 1] that sets the
             hysteresis damping factor chi of the law. The restitution a law
@@ -165,7 +165,7 @@ class Contact(eqx.Module):
     def __check_init__(self):
         if not isinstance(self.law, AbstractContactLaw):
             raise ParameterError(
-                f"contact law {self.law!r} is not a jaxcrank.laws.AbstractContactLaw; pass e.g. "
+                f"contact law {self.law!r} is not a jaxcrank.physics.laws.AbstractContactLaw; pass e.g. "
                 f"laws.Flores() (TOML and --set take the names: {', '.join(CONTACT_LAWS)})"
             )
         _check("restitution", self.restitution, low=0.0, high=1.0, high_open=False)
@@ -184,10 +184,10 @@ class Friction(eqx.Module):
     rising to 1 at ``v1``. The ramp width ``v1 - v0`` is the smoothing width.
 
     Attributes:
-        law: the ramp, a :class:`jaxcrank.laws.AbstractFrictionLaw`:
-            :class:`~jaxcrank.laws.SmoothRamp` (``"smooth"``, C2 quintic ramp between
+        law: the ramp, a :class:`jaxcrank.physics.laws.AbstractFrictionLaw`:
+            :class:`~jaxcrank.physics.laws.SmoothRamp` (``"smooth"``, C2 quintic ramp between
             v0 and v1, the default for differentiable solves) or
-            :class:`~jaxcrank.laws.Ambrosio` (``"ambrosio"``, the reference linear
+            :class:`~jaxcrank.physics.laws.Ambrosio` (``"ambrosio"``, the reference linear
             ramp, with kinks at v0 and v1).
         coefficient: dynamic friction coefficient mu, dimensionless, >= 0
             (0 disables friction).
@@ -210,7 +210,7 @@ class Friction(eqx.Module):
     def __check_init__(self):
         if not isinstance(self.law, AbstractFrictionLaw):
             raise ParameterError(
-                f"friction law {self.law!r} is not a jaxcrank.laws.AbstractFrictionLaw; pass e.g. "
+                f"friction law {self.law!r} is not a jaxcrank.physics.laws.AbstractFrictionLaw; pass e.g. "
                 f"laws.Ambrosio() (TOML and --set take the names: {', '.join(FRICTION_LAWS)})"
             )
         _check("friction coefficient", self.coefficient, low=0.0, low_open=False)

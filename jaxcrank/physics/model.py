@@ -15,7 +15,7 @@ A map ``Q = full_positions(s, t)`` gives the full coordinates
 Q = (x2, y2, theta2, x3); the equations of motion are Lagrange's
 ``J^T M J s'' = J^T (F - M gamma)`` with ``J = dQ/ds`` and ``gamma = dJ/dt s'``
 computed by forward-mode autodiff, so ideal-joint reactions drop out and are
-recovered afterwards by :func:`jaxcrank.ideal.reactions`.
+recovered afterwards by :func:`jaxcrank.physics.ideal.reactions`.
 
 The state vector (all entries dimensionless, see :func:`state_scales`) is
 ``y = (s, s', approach-speed memory per clearance joint, driver work, dissipated work)``.
@@ -34,7 +34,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from . import ideal, laws, linalg
+from ..numerics import linalg
+from . import ideal, laws
 from .params import Joint, Material, Mechanism
 
 # --------------------------------------------------------------------------- layout

@@ -83,7 +83,7 @@ def checks_as_nan():
     import); this is the one place jaxcrank sets equinox's module setting, for a block.
     JAX keeps the traces of inner jitted functions for the process, checks included:
     inside jaxcrank's solve these are only diffrax's checks of the sample times that
-    :func:`jaxcrank.solve.simulate` builds (increasing, within the span), which cannot fail.
+    :func:`jaxcrank.numerics.solve.simulate` builds (increasing, within the span), which cannot fail.
     """
     from equinox import _errors
 
@@ -100,10 +100,10 @@ def _environment() -> bytes:
     """What every exported program depends on besides its own key: jaxcrank's and
     optim's sources, the versions of the packages that trace them, backend, flags."""
     h = hashlib.sha256()
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     for package in ("jaxcrank", "optim"):
-        for f in sorted((root / package).glob("*.py")):
-            h.update(f.name.encode())
+        for f in sorted((root / package).rglob("*.py")):
+            h.update(f.relative_to(root).as_posix().encode())
             h.update(f.read_bytes())
     for dist in ("jax", "jaxlib", "equinox", "diffrax", "lineax", "optimistix", "optax"):
         try:

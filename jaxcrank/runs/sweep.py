@@ -1,7 +1,7 @@
 """Sweeps: many designs of one mechanism, one at a time or in ``vmap`` batches.
 
 A sweep is a table of designs over named parameters (any name
-:func:`jaxcrank.params.set_parameter` accepts: ``rod_length``,
+:func:`jaxcrank.physics.params.set_parameter` accepts: ``rod_length``,
 ``contact.restitution``, ``clearance_B``, ...), built by a sampler
 (:func:`full_factorial`, :func:`latin_hypercube`, :func:`random_uniform`,
 :func:`one_at_a_time`, :func:`monte_carlo`) and run by :func:`run`:
@@ -24,7 +24,7 @@ A sweep is a table of designs over named parameters (any name
   (no per-step collective; see :func:`_evaluate`);
 - ``workers = N`` solves chunks in N local processes (one per CPU core), the way to
   use several cores of one machine: XLA compiles the solver loop into one
-  single-threaded kernel (:mod:`jaxcrank.runtime`), and several host devices in one
+  single-threaded kernel (:mod:`jaxcrank.numerics.runtime`), and several host devices in one
   process do not run at the same time.
 
 Which chunk is fastest depends on the device (``bench/bench_sweep.py``): on a CPU a
@@ -35,7 +35,7 @@ in its free memory, :func:`default_chunk`).
 
 Reproducibility: a design's numbers do not depend on its batch mates, its position
 in the batch, the batch size (>= 2), the number of devices, processes or workers
-(with :mod:`jaxcrank.runtime`'s XLA options: no FMA contraction, which otherwise
+(with :mod:`jaxcrank.numerics.runtime`'s XLA options: no FMA contraction, which otherwise
 rounds differently per lane and batch size). Solving alone (one design per device)
 and in a batch are two compiled programs that round differently in the last bit,
 which impact chaos amplifies (1e-5..1e-3 relative after 3 ms): a resumed sweep must
@@ -70,10 +70,10 @@ from jaxtyping import Array, ArrayLike, Float, Int, Shaped
 from tqdm.auto import tqdm
 
 from . import config
-from .errors import CorruptFileError
-from .metrics import METRICS
-from .params import Mechanism, ParameterError, parameter_unit, set_parameters
-from .solve import DEFAULTS, SolveOptions, simulate
+from ..errors import CorruptFileError
+from ..analysis.metrics import METRICS
+from ..physics.params import Mechanism, ParameterError, parameter_unit, set_parameters
+from ..numerics.solve import DEFAULTS, SolveOptions, simulate
 
 STATUSES = ("ok", "max_steps", "solver_failed", "non_finite", "invalid")
 _MESSAGES = {
@@ -93,7 +93,7 @@ class Settings:
         samples_per_revolution: output samples per revolution (3600: every 0.1 deg,
             as ``jaxcrank simulate``); peaks are taken over these samples.
         metrics_from_revolution: metrics cover t > this many revolutions (default 1).
-        solver, rtol, atol, max_steps: the fields of :class:`jaxcrank.solve.SolveOptions`
+        solver, rtol, atol, max_steps: the fields of :class:`jaxcrank.numerics.solve.SolveOptions`
             (same defaults), flat here so a sweep spec's ``[simulation]`` table names them.
 
     Raises:
@@ -126,7 +126,7 @@ class Settings:
 
     @property
     def options(self) -> SolveOptions:
-        """The solver settings as :class:`jaxcrank.solve.SolveOptions`."""
+        """The solver settings as :class:`jaxcrank.numerics.solve.SolveOptions`."""
         return DEFAULTS.replace(solver=self.solver, rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
 
     @property
@@ -396,7 +396,7 @@ def run(
 
     Args:
         base: the mechanism every design starts from.
-        names: parameter names (see :func:`jaxcrank.params.set_parameter`).
+        names: parameter names (see :func:`jaxcrank.physics.params.set_parameter`).
         designs: (N, len(names)) parameter values, SI.
         settings: how each design is simulated.
         out: directory for ``table.csv`` and ``designs.npy``, appended after every
@@ -575,7 +575,7 @@ _WORKER: dict = {}
 
 
 def _worker_init(base_dict, names, settings):
-    # a fresh (spawned) process: importing jaxcrank applies jaxcrank.runtime's XLA options
+    # a fresh (spawned) process: importing jaxcrank applies jaxcrank.numerics.runtime's XLA options
     _WORKER.update(base=config.from_dict(base_dict), names=names, settings=settings)
 
 

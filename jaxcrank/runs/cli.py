@@ -13,10 +13,12 @@ import sys
 import time
 from pathlib import Path
 
-from . import __version__, config
-from .errors import CorruptFileError
-from .params import ParameterError, paper, parameter_unit
-from .solve import DEFAULTS, SOLVERS, SimulationError
+from .. import __version__
+
+from . import config
+from ..errors import CorruptFileError
+from ..physics.params import ParameterError, paper, parameter_unit
+from ..numerics.solve import DEFAULTS, SOLVERS, SimulationError
 
 
 def _simulate_parser(sub):
@@ -71,7 +73,11 @@ def run_simulate(args) -> int:
     import jax
     import numpy as np
 
-    from . import outputs, plots, solve
+    from ..analysis import outputs
+
+    from . import plots
+
+    from ..numerics import solve
 
     mech = config.load(args.config) if args.config else paper()
     overrides = list(args.overrides)
@@ -156,7 +162,7 @@ def run_simulate(args) -> int:
 
 
 def _window_label(metrics: dict, period: float) -> str:
-    """What the metrics window of :func:`jaxcrank.outputs.summary_metrics` was, in words."""
+    """What the metrics window of :func:`jaxcrank.analysis.outputs.summary_metrics` was, in words."""
     start, end = metrics["window_start_s"], metrics["window_end_s"]
     if start == 0.0:
         return f"over the whole run, 0 to {end:g} s (shorter than one crank revolution, {period:g} s)"
@@ -225,7 +231,9 @@ def _sweep_parser(sub):
 def run_sweep(args) -> int:
     import jax
 
-    from . import metrics, plots, sweep
+    from ..analysis import metrics
+
+    from . import plots, sweep
     from . import spec as spec_module
 
     if args.distributed or args.coordinator:
@@ -286,7 +294,7 @@ def _versions():
     import jax
     import numpy
 
-    from . import runtime
+    from ..numerics import runtime
 
     return {
         "python": platform.python_version(),

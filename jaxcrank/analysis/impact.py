@@ -1,5 +1,5 @@
 """Impacts of a free pin on a bearing wall, through the same joint model as the
-mechanism (:func:`jaxcrank.model.joint_contact` and its approach-speed memory).
+mechanism (:func:`jaxcrank.physics.model.joint_contact` and its approach-speed memory).
 Used to check each contact law's achieved restitution against the exact relation
 ``chi (1 + e) = ln((1 + chi) / (1 - chi e))`` (model.md):
 
@@ -26,8 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from . import model
-from .params import Mechanism
+from ..physics import model
+from ..physics.params import Mechanism
 
 
 @eqx.filter_jit

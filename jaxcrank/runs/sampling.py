@@ -1,8 +1,8 @@
 """Design samplers: tables of designs over named parameters, SI units.
 
 Every sampler returns ``(names, designs)``, the parameter names (any name
-:func:`jaxcrank.params.set_parameter` accepts) and an array of shape
-``(N, len(names))`` of their values, ready for :func:`jaxcrank.sweep.run` or for a
+:func:`jaxcrank.physics.params.set_parameter` accepts) and an array of shape
+``(N, len(names))`` of their values, ready for :func:`jaxcrank.runs.sweep.run` or for a
 design problem (:mod:`optim`).
 
 - :func:`full_factorial`: every combination of given levels;
@@ -22,7 +22,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from jaxtyping import Float
 
-from .params import Mechanism, ParameterError, get_parameter
+from ..physics.params import Mechanism, ParameterError, get_parameter
 
 
 def _ranges(ranges: Mapping[str, Sequence[float]]):

@@ -3,11 +3,11 @@ with the number of samples or steps.
 
 :class:`MetricsTracking` wraps a diffrax solver. After each step it
 
-- evaluates the signals of :data:`jaxcrank.metrics.PEAK_METRICS` at the step's end
+- evaluates the signals of :data:`jaxcrank.analysis.metrics.PEAK_METRICS` at the step's end
   and keeps their running maxima: the peaks over the solution, independent of the
   output sample times (a step a few microseconds long resolves an impact, an
   output sample every 0.1 deg of crank angle does not);
-- evaluates the signals of :data:`jaxcrank.metrics.RMS_METRICS` at the sample times
+- evaluates the signals of :data:`jaxcrank.analysis.metrics.RMS_METRICS` at the sample times
   that fall in the step, from the step's dense output (the values ``SaveAt(ts=...)``
   would store), and adds their squares: the RMS over the samples, the numbers of the
   RMS of stored samples (to rounding). The sample times are equally spaced and
@@ -30,14 +30,15 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from . import metrics, model
+from ..analysis import metrics
+from ..physics import model
 
 
 class Running(NamedTuple):
     """The accumulators (a solver-state entry): peaks over step ends in the window
-    and over the whole run (in the order of :data:`jaxcrank.metrics.PEAK_METRICS`),
+    and over the whole run (in the order of :data:`jaxcrank.analysis.metrics.PEAK_METRICS`),
     sums of squares over the window's samples and their count (order of
-    :data:`jaxcrank.metrics.RMS_METRICS`), and the index of the next sample time."""
+    :data:`jaxcrank.analysis.metrics.RMS_METRICS`), and the index of the next sample time."""
 
     peaks: Float[Array, " peaks"]
     whole_run_peaks: Float[Array, " peaks"]
@@ -142,7 +143,7 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
 
 
 def finish(running: Running) -> dict[str, Array]:
-    """The metrics of :data:`jaxcrank.metrics.METRICS` (plus
+    """The metrics of :data:`jaxcrank.analysis.metrics.METRICS` (plus
     ``peak_contact_force_{B,C}_whole_run_N``) from the accumulators of a finished
     solve; units as in the names. A window without samples gives an RMS of 0."""
     out = {k: running.peaks[..., j] for j, k in enumerate(metrics.PEAK_METRICS)}

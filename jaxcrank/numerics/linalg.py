@@ -2,7 +2,7 @@
 
 XLA never compiles a while loop that contains a custom call (LAPACK's ``getrf``
 behind ``jnp.linalg.inv`` and ``jax.scipy.linalg.lu_factor``) into one kernel
-(:mod:`jaxcrank.runtime`), so an implicit solver that factorises its 10 x 10
+(:mod:`jaxcrank.numerics.runtime`), so an implicit solver that factorises its 10 x 10
 iteration matrix with LAPACK keeps the whole solver loop on XLA's slower thunk
 runtime. For matrices this small, elimination written as array operations costs
 less than the call did; the 2 x 2 systems of the equations of motion and the

@@ -2,7 +2,7 @@
 
 Every numerical choice is an argument of :func:`simulate` with a default; none
 lives in the physics parameters. Tolerances act on the dimensionless state of
-:func:`jaxcrank.model.state_scales` (lengths in clearances, velocities in
+:func:`jaxcrank.physics.model.state_scales` (lengths in clearances, velocities in
 clearance x crank speed), so ``rtol = atol = 1e-6`` asks for a local error of about
 1e-6 of the clearance per step; impacts amplify it (the docs' benchmarks page gives
 the measured global error).
@@ -23,9 +23,10 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from . import model, tracking
+from ..physics import model
+from ..physics.params import Mechanism, ParameterError
+from . import tracking
 from .linalg import DenseInverse
-from .params import Mechanism, ParameterError
 from .rosenbrock import Rodas4
 
 SOLVERS = {
@@ -47,7 +48,7 @@ class SolveOptions:
     Attributes:
         solver: a name in :data:`SOLVERS`.
         rtol, atol: error tolerances on the dimensionless state
-            (:func:`jaxcrank.model.state_scales`), > 0.
+            (:func:`jaxcrank.physics.model.state_scales`), > 0.
         dt0: initial step, s, > 0.
         max_steps: step budget (accepted and rejected steps), >= 1.
 
@@ -95,7 +96,7 @@ class Simulation(eqx.Module):
         result: diffrax result code (``diffrax.RESULTS``).
         num_steps: accepted steps. num_rejected: rejected steps.
         metrics: the headline metrics tracked during the solve
-            (:func:`jaxcrank.tracking.finish`: name -> value, units in the name), or
+            (:func:`jaxcrank.numerics.tracking.finish`: name -> value, units in the name), or
             ``None`` when the solve did not track them (``metrics_start=None``).
     """
 
@@ -115,7 +116,7 @@ class Simulation(eqx.Module):
 def make_solver(name: str = DEFAULT_SOLVER):
     """A diffrax solver by name (``SOLVERS``). The implicit Runge-Kutta ones (Kvaerno)
     use diffrax's chord Newton method at the step-size controller's tolerances, with
-    :class:`jaxcrank.linalg.DenseInverse` for its linear solves instead of lineax's
+    :class:`jaxcrank.numerics.linalg.DenseInverse` for its linear solves instead of lineax's
     LU, a LAPACK call that keeps XLA from compiling the solver loop into one kernel."""
     if name not in SOLVERS:
         raise ValueError(f"solver {name!r} is unknown; valid names: {', '.join(SOLVERS)}")
@@ -139,7 +140,7 @@ def step_size_controller(solver, rtol, atol):
 def _with_tolerances(solver, controller):
     """An implicit solver's root finder with the controller's tolerances and norm
     filled in where it takes them from the controller (what ``diffeqsolve`` does for
-    an implicit solver it sees; a :class:`~jaxcrank.tracking.MetricsTracking`
+    an implicit solver it sees; a :class:`~jaxcrank.numerics.tracking.MetricsTracking`
     wrapper hides the solver from that check)."""
     if not isinstance(solver, diffrax.AbstractImplicitSolver):
         return solver
@@ -246,7 +247,7 @@ def simulate(
         ts: sample times, s, increasing, starting at the initial time. Without it,
             ``n_samples`` equally spaced times from 0 to ``t1``.
         n_samples: number of equally spaced samples (default one per 0.1 deg of crank).
-        y0: scaled state at ``ts[0]`` (default :func:`jaxcrank.model.initial_state`,
+        y0: scaled state at ``ts[0]`` (default :func:`jaxcrank.physics.model.initial_state`,
             pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.
         options: the numerical settings (:class:`SolveOptions`).
         solver, rtol, atol, dt0, max_steps: override the field of ``options`` of the
@@ -257,7 +258,7 @@ def simulate(
             the cheaper gradient.
         progress: show a tqdm progress bar (host callback; CLI runs).
         metrics_start: when given (s), the solve tracks the headline metrics over
-            ``t > metrics_start`` (:mod:`jaxcrank.tracking`: peaks at every accepted
+            ``t > metrics_start`` (:mod:`jaxcrank.numerics.tracking`: peaks at every accepted
             step, RMS over the sample times, which must then be equally spaced) into
             ``Simulation.metrics``. Forward mode only (no reverse-mode gradient
             through the tracking).

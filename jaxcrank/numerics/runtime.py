@@ -88,7 +88,7 @@ def configure(environ=os.environ, machine: str | None = None) -> str:
         if jax.default_backend() == "cpu":
             warnings.warn(
                 "jaxcrank was imported after JAX started its backend, so it could not set its XLA "
-                "options (jaxcrank.runtime): simulations on the CPU then run about 10x slower, or, where "
+                "options (jaxcrank.numerics.runtime): simulations on the CPU then run about 10x slower, or, where "
                 "XLA_FLAGS already compile while loops into one kernel, with inexact reverse-mode "
                 "gradients. Import "
                 "jaxcrank before running any JAX computation, or start Python with "

@@ -3,7 +3,7 @@ speed the damping uses against the true normal speed just before onset.
 
 The contact laws divide by ``delta_dot_minus``, the normal speed at the onset of an
 impact (model.md); jaxcrank carries it as a memory state per clearance joint
-(:func:`jaxcrank.model.memory_tracking`). :func:`onsets` solves a run as
+(:func:`jaxcrank.physics.model.memory_tracking`). :func:`onsets` solves a run as
 :func:`jaxcrank.simulate` does (same solver, controller and tolerances), keeps every
 accepted step and the solver's dense output, finds each step in which a penetration
 delta crosses zero upwards, locates the crossing by bisection on the dense output,
@@ -25,8 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from . import laws, model, solve
-from .params import Mechanism
+from ..numerics import solve
+from ..physics import laws, model
+from ..physics.params import Mechanism
 
 
 class Onsets(NamedTuple):

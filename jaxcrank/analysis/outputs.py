@@ -1,9 +1,9 @@
-"""Outputs as functions of a :class:`~jaxcrank.solve.Simulation`.
+"""Outputs as functions of a :class:`~jaxcrank.numerics.solve.Simulation`.
 
 :func:`frames` evaluates the model at every sample (accelerations come from the
 vector field, not from finite differences); :func:`trajectory` turns that into
 named columns with units; :func:`summary_metrics` gives the headline numbers of
-:mod:`jaxcrank.metrics` for a run's summary.
+:mod:`jaxcrank.analysis.metrics` for a run's summary.
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from . import ideal, model
+from ..numerics.solve import Simulation
+from ..physics import ideal, model
+from ..physics.params import ParameterError
 from .metrics import DEG, headline, transmission_angle_deviation
-from .params import ParameterError
-from .solve import Simulation
 
 # column name -> unit, in CSV order; the first block is the issue's required set
 COLUMNS = {
@@ -75,7 +75,7 @@ def _frames(mech, ts, ys):
 
 def frames(sim: Simulation) -> model.Frame:
     """The model evaluated at every sample time of ``sim``: a
-    :class:`jaxcrank.model.Frame` of arrays with a leading axis of length n (samples).
+    :class:`jaxcrank.physics.model.Frame` of arrays with a leading axis of length n (samples).
 
     One compiled program with the parameters traced, so every mechanism of the same
     structure and sample count reuses it."""
@@ -159,8 +159,8 @@ _headline = jax.jit(headline)
 
 def summary_metrics(sim: Simulation) -> dict[str, float]:
     """The headline metrics a solve tracked (``simulate(..., metrics_start=...)``,
-    :mod:`jaxcrank.tracking`) as Python floats: ``window_start_s``, every metric of
-    :data:`jaxcrank.metrics.METRICS` and the whole run's peak contact forces
+    :mod:`jaxcrank.numerics.tracking`) as Python floats: ``window_start_s``, every metric of
+    :data:`jaxcrank.analysis.metrics.METRICS` and the whole run's peak contact forces
     (``peak_contact_force_{B,C}_whole_run_N``); units in the names.
 
     Raises:
@@ -172,7 +172,7 @@ def summary_metrics(sim: Simulation) -> dict[str, float]:
 
 
 def sample_metrics(sim: Simulation, t_start: Float[ArrayLike, ""]) -> dict[str, float]:
-    """The headline metrics (:data:`jaxcrank.metrics.METRICS`) over the stored
+    """The headline metrics (:data:`jaxcrank.analysis.metrics.METRICS`) over the stored
     samples of ``sim`` with ``t > t_start`` (s), as Python floats: the peaks are
     maxima over the samples, not over the solve (for solves that were not tracked,
     e.g. another package's solution wrapped in a :class:`Simulation`).

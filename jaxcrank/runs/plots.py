@@ -1,4 +1,4 @@
-"""Figures in the style of the paper (Figs. 4-10), from :func:`jaxcrank.outputs.trajectory` columns."""
+"""Figures in the style of the paper (Figs. 4-10), from :func:`jaxcrank.analysis.outputs.trajectory` columns."""
 
 from __future__ import annotations
 
@@ -151,7 +151,7 @@ def _label(col: str) -> str:
 
 
 def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
-    """Figures of a sweep table (:func:`jaxcrank.sweep.read_table`) into ``out_dir``:
+    """Figures of a sweep table (:func:`jaxcrank.runs.sweep.read_table`) into ``out_dir``:
     heat maps for two-parameter grids, metric-vs-parameter lines (mean and min-max
     band over the other parameters) for grids and one-at-a-time lines, scatter plots
     for LHS / random samples, histograms for Monte Carlo. Failed designs are drawn

@@ -1,5 +1,5 @@
 """Sweep specifications: a sweep read from a TOML file or dict (``jaxcrank sweep
-SPEC.toml``), next to :mod:`jaxcrank.config` which reads the mechanism part.
+SPEC.toml``), next to :mod:`jaxcrank.runs.config` which reads the mechanism part.
 
 Every problem with a spec raises :class:`jaxcrank.ParameterError` naming the key
 and what is valid.
@@ -13,8 +13,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from . import config
-from .metrics import METRICS
-from .params import Mechanism, ParameterError, get_parameter, parameter_unit
+from ..analysis.metrics import METRICS
+from ..physics.params import Mechanism, ParameterError, get_parameter, parameter_unit
 from .sampling import Tolerance, full_factorial, latin_hypercube, monte_carlo, one_at_a_time, random_uniform
 from .sweep import Settings
 

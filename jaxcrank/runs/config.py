@@ -1,10 +1,10 @@
-"""Load and save a :class:`~jaxcrank.params.Mechanism` as TOML, and apply
+"""Load and save a :class:`~jaxcrank.physics.params.Mechanism` as TOML, and apply
 command-line overrides.
 
 The file mirrors the pytree: top-level keys are the mechanism's scalar fields,
 tables ``[joint_B]``, ``[joint_C]``, ``[crank_material]``, ``[rod_material]``,
 ``[slider_material]``, ``[contact]``, ``[friction]`` its parts. Every value is SI
-(see :class:`~jaxcrank.params.Mechanism`). Unknown keys and wrong types are errors.
+(see :class:`~jaxcrank.physics.params.Mechanism`). Unknown keys and wrong types are errors.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .laws import CONTACT_LAWS, FRICTION_LAWS, AbstractContactLaw, AbstractFrictionLaw
-from .params import Contact, Friction, Joint, Material, Mechanism, ParameterError
+from ..physics.laws import CONTACT_LAWS, FRICTION_LAWS, AbstractContactLaw, AbstractFrictionLaw
+from ..physics.params import Contact, Friction, Joint, Material, Mechanism, ParameterError
 
 _PARTS = {
     "joint_B": Joint,
