@@ -29,7 +29,14 @@ def _simulate_parser(sub):
         "--config/--set say otherwise) and write trajectory.csv, config.toml, "
         "summary.json and figures/ into --out.",
     )
-    p.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
+    base = p.add_mutually_exclusive_group()
+    base.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
+    base.add_argument(
+        "--design",
+        type=Path,
+        metavar="RESULT_JSON",
+        help="simulate the final design of a `jaxcrank optimize` run, e.g. --design runs/optimize/result.json",
+    )
     p.add_argument("--out", type=Path, default=Path("runs/paper"), help="run directory (default: runs/paper)")
     p.add_argument(
         "--set",
@@ -37,7 +44,8 @@ def _simulate_parser(sub):
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a parameter, e.g. --set rod_length=0.41 --set contact.law=flores (repeatable)",
+        help="override a parameter (SI), as the library names it, e.g. --set rod_length=0.41 "
+        "--set clearance_B=2e-4 --set contact.law=flores (repeatable)",
     )
     p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
     p.add_argument("--t1", type=float, default=0.4, help="simulated time, s (default 0.4 = 4 revolutions at 600 rpm)")
@@ -79,7 +87,10 @@ def run_simulate(args) -> int:
 
     from ..numerics import solve
 
-    mech = config.load(args.config) if args.config else paper()
+    if args.design:
+        mech = config.load_design(args.design)
+    else:
+        mech = config.load(args.config) if args.config else paper()
     overrides = list(args.overrides)
     if args.rpm is not None:
         overrides.append(f"crank_speed={2.0 * math.pi * args.rpm / 60.0!r}")
