@@ -14,11 +14,10 @@ import time
 from pathlib import Path
 
 from .. import __version__
-
-from . import config
 from ..errors import CorruptFileError
-from ..physics.params import ParameterError, paper, parameter_unit
 from ..numerics.solve import DEFAULTS, SOLVERS, SimulationError
+from ..physics.params import ParameterError, paper, parameter_unit
+from . import config
 
 
 def _simulate_parser(sub):
@@ -82,10 +81,8 @@ def run_simulate(args) -> int:
     import numpy as np
 
     from ..analysis import outputs
-
-    from . import plots
-
     from ..numerics import solve
+    from . import plots
 
     if args.design:
         mech = config.load_design(args.design)
@@ -243,7 +240,6 @@ def run_sweep(args) -> int:
     import jax
 
     from ..analysis import metrics
-
     from . import plots, sweep
     from . import spec as spec_module
 
