@@ -75,11 +75,15 @@ PAPER_REDUCTION_PCT = reference.value("optimisation", "reduction_percent")
 
 
 def add_parser(sub):
-    p = sub.add_parser(
-        "optimize",
-        help="minimise the RMS transmission-angle error (paper Eq. 19) with optax",
-        description="Optimise a design problem (default: the paper's L1, L2 problem) with gradients "
-        "through the simulation; writes history, figures and result.json into --out.",
+    """Add the ``optimize`` command to the subparsers ``sub`` of an argparse parser."""
+    return add_arguments(sub.add_parser("optimize", help="minimise the RMS transmission-angle error with optax"))
+
+
+def add_arguments(p):
+    """Add ``optimize``'s description and options to its parser ``p``."""
+    p.description = (
+        "Optimise a design problem (default: the paper's L1, L2 problem) with gradients "
+        "through the simulation; writes history, figures and result.json into --out."
     )
     p.add_argument("--config", type=Path, help="TOML settings (see optim/cli.py); default: the paper problem")
     p.add_argument("--out", type=Path, default=Path("runs/optimize"), help="run directory (default runs/optimize)")
