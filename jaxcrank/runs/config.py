@@ -87,7 +87,14 @@ def _convert(section: str, key: str, value):
 
 def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
     """Build a validated Mechanism from a (possibly partial) nested dict; missing
-    keys keep the values of ``base`` (default: the paper preset)."""
+    keys keep the values of ``base`` (default: the paper preset). The top-level keys
+    ``clearance_B`` / ``clearance_C`` (m) set the pin radius to the joint's hole radius
+    (the one ``data`` gives, else the base's) minus the clearance.
+
+    Raises:
+        ParameterError: for an unknown key, a wrong type or a value out of its range
+            (a clearance outside (0, hole_radius), or given with that joint's pin_radius).
+    """
     merged = to_dict(Mechanism() if base is None else base)
     clearances = {}
     for key, value in data.items():
