@@ -5,10 +5,10 @@ reads it back), ``checkpoint.npz`` and ``history.csv`` (after every iteration),
 ``history.png`` (the paper's Fig. 11, the reported best iterate marked) and
 ``result.json``. With ``--grid N`` (N > 0; default 0, no grid) two-variable problems
 also get ``grid.csv`` and ``landscape.png``: the objective on an N x N vmap grid over
-the box with the optimiser's path (it costs N^2 solves: on one CPU core a 21 x 21 grid
-of the paper problem takes about 4.5 minutes). With ``--starts N`` (N > 1) each start
-runs in ``start_NNN/`` (its own checkpoint and history) and ``multistart.json`` lists
-the starts; the top-level files describe the best run (:func:`optim.optimize.multistart`).
+the box with the optimiser's path; it costs N^2 solves (docs/optimisation.md times
+it). With ``--starts N`` (N > 1) each start runs in ``start_NNN/`` (its own checkpoint
+and history) and ``multistart.json`` lists the starts; the top-level files describe
+the best run (:func:`optim.optimize.multistart`).
 
 ``result.json`` holds: the problem and method; ``converged`` (true when a stopping
 test was met) and ``stop_reason`` (the test, or the iteration limit); ``iterations``;
@@ -107,8 +107,8 @@ def add_arguments(p):
         default=0,
         metavar="N",
         help="also evaluate the objective on an N x N grid over the box and draw landscape.png "
-        "(two-variable problems; N^2 solves: N = 21 takes about 4.5 min on one CPU core for the "
-        "paper problem; default 0: no grid)",
+        "(two-variable problems; N^2 solves: the paper problem's 21 x 21 grid takes minutes, "
+        "about three times its optimisation; default 0: no grid)",
     )
     p.add_argument(
         "--grid-from",
