@@ -105,6 +105,7 @@ def cli(folder: Path, out: Path, extra: list[str]) -> dict:
         "start_objective_deg": result["start_objective_deg"],
         "reduction_percent": result["reduction_percent"],
         "converged": result["converged"],
+        "stop_reason": result["stop_reason"],
     }
 
 

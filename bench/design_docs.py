@@ -151,7 +151,7 @@ def main():
         "",
         "![convergence](bench_results/design.png)",
         "",
-        "Target of issue 16: at >= 8 variables our optimiser within 1 % of the best >= 5x sooner than the best "
+        "Goal: at >= 8 variables, our optimiser within 1 % of the best value at least 5x sooner than the best "
         f"gradient-free method. Measured speedup at {big['n_variables']} variables: "
         f"{_s(big['speedup_vs_best_gradient_free'], '{:.2f}')} (1 %), "
         f"{_s(big.get('speedup_vs_best_gradient_free_5pct'), '{:.2f}')} (5 %): "

@@ -311,6 +311,35 @@ def table_friction_width() -> str:
     return t1 + "\nWith Ambrosio's typical ramp end v1 = 2e-4 m/s:\n\n" + t2 + source("friction_width")
 
 
+def table_paper_assumptions() -> str:
+    """Paper reproduction: max |deviation| after the first revolution per unstated assumption."""
+    d = results("paper_assumptions")
+    env = d["paper_envelope_m"]
+    rows = []
+    for r in d["rows"]:
+        value = r["value"]
+        shown = f"`{value}`" if isinstance(value, str) else (f"{value / 1e9:g} GPa" if value >= 1e9 else fmt(value))
+        rows.append(
+            [
+                r["assumption"],
+                shown + (" (preset)" if r["preset"] else ""),
+                f"{r['max_abs_slider_x_deviation_m'] * 1e3:.3f}",
+                f"{r['max_abs_rod_x_deviation_m'] * 1e3:.3f}",
+                f"{r['geometric_bound_slider_x_m'] * 1e3:.3f}",
+                f"{r['max_penetration_m'] * 1e6:.1f}",
+            ]
+        )
+    head = [
+        "assumption",
+        "value",
+        f"max abs slider x dev [mm] (paper +-{env['slider_x'] * 1e3:g})",
+        f"max abs rod x dev [mm] (paper +-{env['rod_x'] * 1e3:g})",
+        "geometric bound, slider [mm]",
+        "largest penetration [um]",
+    ]
+    return table(head, rows) + source("paper_assumptions")
+
+
 def table_sweep() -> str:
     d = results("sweep")
     label = {
@@ -602,6 +631,7 @@ TABLES = {
     "work_precision": table_work_precision,
     "stiffness": table_stiffness,
     "friction_width": table_friction_width,
+    "paper_assumptions": table_paper_assumptions,
     "sweep": table_sweep,
     "sweep_gpu": table_sweep_gpu,
     "optim": table_optim,

@@ -1,13 +1,25 @@
-"""``jaxcrank optimize [--config FILE] [--out DIR] [--resume] [options]``.
+"""``jaxcrank optimize [--config FILE] [--out DIR] [--resume] [--grid N] [options]``.
 
 The run directory gets ``optimize.toml`` (the resolved settings; ``--resume``
 reads it back), ``checkpoint.npz`` and ``history.csv`` (after every iteration),
-``history.png`` (the paper's Fig. 11), ``grid.csv`` and ``landscape.png`` (the
-vmap grid over the box with the optimiser's path; two-variable problems) and
-``result.json`` (start and final design, reduction in percent, grid best). With
-``--starts N`` (N > 1) each start runs in ``start_NNN/`` (its own checkpoint and
-history) and ``multistart.json`` lists the starts; the top-level files describe the
-best run (:func:`optim.optimize.multistart`).
+``history.png`` (the paper's Fig. 11, the reported best iterate marked) and
+``result.json``. With ``--grid N`` (N > 0; default 0, no grid) two-variable problems
+also get ``grid.csv`` and ``landscape.png``: the objective on an N x N vmap grid over
+the box with the optimiser's path; it costs N^2 solves (docs/optimisation.md times
+it). With ``--starts N`` (N > 1) each start runs in ``start_NNN/`` (its own checkpoint
+and history) and ``multistart.json`` lists the starts; the top-level files describe
+the best run (:func:`optim.optimize.multistart`).
+
+``result.json`` holds: the problem and method; ``converged`` (true when a stopping
+test was met) and ``stop_reason`` (the test, or the iteration limit); ``iterations``;
+the start and final design (``*_design_SI``, the variables' values) and objective
+(deg); ``reduction_percent``; ``final_parameters_SI`` (the mechanism parameters the
+final design sets, by their library names); ``final_mechanism`` (every parameter of
+the final design's mechanism, SI, as in ``config.toml``); ``simulate_command`` (the
+command that simulates the final design: ``jaxcrank simulate --design
+DIR/result.json``); ``starts`` (how many starts ran) and, for ``--starts N > 1``,
+``start_runs`` (each start's result) and ``best_start`` (the index of the best);
+``grid`` (with ``--grid N``) and ``paper`` (the paper's numbers).
 
 The optimiser's compiled programs are kept in a cache folder (:mod:`jaxcrank.runs.cache`;
 ``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
@@ -63,15 +75,21 @@ PAPER_REDUCTION_PCT = reference.value("optimisation", "reduction_percent")
 
 
 def add_parser(sub):
-    p = sub.add_parser(
-        "optimize",
-        help="minimise the RMS transmission-angle error (paper Eq. 19) with optax",
-        description="Optimise a design problem (default: the paper's L1, L2 problem) with gradients "
-        "through the simulation; writes history, figures and result.json into --out.",
+    """Add the ``optimize`` command to the subparsers ``sub`` of an argparse parser."""
+    return add_arguments(sub.add_parser("optimize", help="minimise the RMS transmission-angle error with optax"))
+
+
+def add_arguments(p):
+    """Add ``optimize``'s description and options to its parser ``p``."""
+    p.description = (
+        "Optimise a design problem (default: the paper's L1, L2 problem) with gradients "
+        "through the simulation; writes history, figures and result.json into --out."
     )
     p.add_argument("--config", type=Path, help="TOML settings (see optim/cli.py); default: the paper problem")
     p.add_argument("--out", type=Path, default=Path("runs/optimize"), help="run directory (default runs/optimize)")
-    p.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
+    p.add_argument(
+        "--resume", action="store_true", help="continue the run in --out from its last checkpoint (--out must exist)"
+    )
     p.add_argument("--problem", choices=sorted(PROBLEMS), help="problem preset (overrides the config's)")
     p.add_argument("--method", choices=METHODS, help="optimiser (default adam)")
     p.add_argument("--iterations", type=int, help="max iterations (default 30)")
@@ -83,7 +101,15 @@ def add_parser(sub):
     )
     p.add_argument("--t-end", type=float, help="end of the evaluation window, s (default 0.3)")
     p.add_argument("--windows", type=int, help="ensemble windows for the gradient (0 = all)")
-    p.add_argument("--grid", type=int, default=21, help="grid points per axis for the landscape (0: none)")
+    p.add_argument(
+        "--grid",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also evaluate the objective on an N x N grid over the box and draw landscape.png "
+        "(two-variable problems; N^2 solves: the paper problem's 21 x 21 grid takes minutes, "
+        "about three times its optimisation; default 0: no grid)",
+    )
     p.add_argument(
         "--grid-from",
         type=Path,
@@ -103,6 +129,8 @@ def add_parser(sub):
 
 
 def _settings(args):
+    if args.resume and not args.out.is_dir():
+        raise ParameterError(f"--resume: {args.out} does not exist; there is no run to continue (drop --resume)")
     cfg = {}
     resumed = args.resume and (args.out / "optimize.toml").exists() and args.config is None
     if args.config or resumed:
@@ -229,7 +257,7 @@ def run(args) -> int:
         res = optimize(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
     wall = time.perf_counter() - tic
     hist = res["history"]
-    plots.plot_history(hist, out / "history.png", title=problem.description)
+    plots.plot_history(hist, out / "history.png", title=problem.description, best=res["final_objective"])
 
     grid_info = None
     if args.grid and problem.n == 2:
@@ -258,17 +286,19 @@ def run(args) -> int:
         "problem": problem.description,
         "names": list(problem.names),
         "method": settings.method,
-        "converged": res["converged"],
+        "converged": res["converged"] is not None,
+        "stop_reason": res["converged"] or f"iteration limit: max_iterations = {settings.max_iterations}",
         "iterations": len(hist),
         "start_design_SI": [hist[0][f"{n}_SI"] for n in problem.names],
         "start_objective_deg": f_start,
         "final_design_SI": res["final"],
         "final_objective_deg": res["final_objective"],
         "reduction_percent": 100.0 * (f_start - res["final_objective"]) / f_start,
+        **_final_mechanism(problem, res["final"], out),
         "wall_seconds_this_call": wall,
-        "starts": res.get("runs"),
-        "best_start": res.get("best_start"),
-        "grid": grid_info,
+        "starts": settings.starts,
+        **({"start_runs": res["runs"], "best_start": res["best_start"]} if "runs" in res else {}),
+        **({"grid": grid_info} if grid_info else {}),
         "paper": {
             "optimum_deg": PAPER_OPTIMUM_DEG,
             "reduction_percent": PAPER_REDUCTION_PCT,
@@ -288,4 +318,22 @@ def run(args) -> int:
         + ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, res["final"]))
         + (f"; grid best {grid_info['best_objective_deg']:.5f} deg" if grid_info else "")
     )
+    print(f"simulate the final design: {result['simulate_command']}")
     return 0
+
+
+def _final_mechanism(problem: Problem, final, out: Path) -> dict:
+    """result.json's entries for the final design: its mechanism parameters by their library
+    names, the whole mechanism (SI, as config.toml) and the command that simulates it."""
+    import numpy as np
+
+    x = np.asarray(final, dtype=float)
+    if hasattr(problem, "physical"):  # a DesignProblem: derived variables set several parameters
+        names, values = problem.physical(x)
+    else:
+        names, values = problem.names, x
+    return {
+        "final_parameters_SI": {n: float(v) for n, v in zip(names, np.asarray(values))},
+        "final_mechanism": mech_config.to_dict(problem.mechanism(x)),
+        "simulate_command": f"jaxcrank simulate --design {out / 'result.json'} --out {out / 'simulate'}",
+    }

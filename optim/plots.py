@@ -76,11 +76,18 @@ def plot_scans(csv_path: Path, report: dict, png: Path):
     plt.close(fig)
 
 
-def plot_history(history: list[dict], png: Path, title=""):
-    """Objective per iteration (the paper's Fig. 11)."""
+def plot_history(history: list[dict], png: Path, title="", best: float | None = None):
+    """Objective (deg) per iteration (the paper's Fig. 11), saved to ``png``; a red star marks
+    the reported best iterate, the first iterate whose objective is ``best`` (default: the
+    history's minimum)."""
     it = [h["iteration"] for h in history]
+    f = [h["objective_deg"] for h in history]
     fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(it, [h["objective_deg"] for h in history], "o-")
+    ax.plot(it, f, "o-", label="iterate")
+    if f:
+        i = int(np.argmin(f)) if best is None else int(np.argmin(np.abs(np.asarray(f) - best)))
+        ax.plot(it[i], f[i], "r*", ms=14, zorder=3, label=f"reported best: iteration {it[i]}, {f[i]:.5g} deg")
+        ax.legend(fontsize=8)
     ax.set_xlabel("iteration")
     ax.set_ylabel("objective [deg]")
     ax.set_title(title or "optimisation history")

@@ -49,3 +49,22 @@ def test_resume_of_a_run_with_other_variables(tmp_path, capsys):
 def test_missing_config_file(tmp_path, capsys):
     code = main(["simulate", "--config", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "run")])
     _one_line_error(capsys, code, "nope.toml")
+
+
+def test_resume_of_a_missing_run_directory_creates_nothing(tmp_path, capsys):
+    out = tmp_path / "never_ran"
+    code = main(["optimize", "--out", str(out), "--resume", "--quiet"])
+    _one_line_error(capsys, code, "--resume", str(out), "does not exist")
+    assert not out.exists()
+
+
+def test_clearance_out_of_range_names_the_parameter_and_range(tmp_path, capsys):
+    code = main(["simulate", "--set", "clearance_B=0.009", "--out", str(tmp_path / "run"), "--quiet"])
+    _one_line_error(capsys, code, "clearance_B", "joint_B.hole_radius")
+
+
+def test_design_file_without_a_final_mechanism(tmp_path, capsys):
+    bad = tmp_path / "result.json"
+    bad.write_text(json.dumps({"final_design_SI": [0.1]}))
+    code = main(["simulate", "--design", str(bad), "--out", str(tmp_path / "run"), "--quiet"])
+    _one_line_error(capsys, code, "result.json", "final_mechanism")

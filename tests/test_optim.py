@@ -423,6 +423,10 @@ def test_optimize_cli_writes_history_figures_and_result(tmp_path):
         assert (out / name).exists(), name
     result = json.loads((out / "result.json").read_text())
     assert result["iterations"] == 2 and np.isfinite(result["reduction_percent"])
+    # no nulls: a real convergence flag and reason, the number of starts; no multistart keys
+    assert result["converged"] is False and result["stop_reason"].startswith("iteration limit")
+    assert result["starts"] == 1 and "start_runs" not in result and "best_start" not in result
+    assert None not in result.values()
     # a second run into the same directory must not silently overwrite it
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--quiet"]) == 2
     # --resume reads the run's own optimize.toml
@@ -443,14 +447,15 @@ def test_optimize_cli_with_several_starts_writes_each_start_and_the_best(tmp_pat
     out = tmp_path / "run"
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--grid", "0", "--quiet"]) == 0
     result = json.loads((out / "result.json").read_text())
-    finals = [r["final_objective"] for r in result["starts"]]
+    assert result["starts"] == 3
+    finals = [r["final_objective"] for r in result["start_runs"]]
     assert len(finals) == 3 and result["final_objective_deg"] == min(finals) == finals[result["best_start"]]
     for k in range(3):
         assert (out / f"start_{k:03d}" / "checkpoint.npz").exists()
     assert (out / "multistart.json").exists() and (out / "history.png").exists()
     # the run's own optimize.toml records the starts; --resume finishes without new work
     assert main(["optimize", "--out", str(out), "--resume", "--grid", "0", "--quiet"]) == 0
-    assert json.loads((out / "result.json").read_text())["starts"] == result["starts"]
+    assert json.loads((out / "result.json").read_text())["start_runs"] == result["start_runs"]
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--quiet"]) == 2
 
 

@@ -1,6 +1,9 @@
-"""Command line: ``jaxcrank simulate [--config FILE] [--out DIR] [overrides]``,
-``jaxcrank sweep --spec FILE [--out DIR] [--resume]`` and ``jaxcrank optimize``
-(:mod:`optim.cli`)."""
+"""Command line: ``jaxcrank simulate [--config FILE | --design RESULT_JSON] [--out DIR]
+[--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]`` and
+``jaxcrank optimize`` (:mod:`optim.cli`).
+
+A command's options are added, and JAX imported, only once the command is named:
+``jaxcrank --help`` lists the commands without loading JAX."""
 
 from __future__ import annotations
 
@@ -15,21 +18,31 @@ from pathlib import Path
 
 from .. import __version__
 
-from . import config
-from ..errors import CorruptFileError
-from ..physics.params import ParameterError, paper, parameter_unit
-from ..numerics.solve import DEFAULTS, SOLVERS, SimulationError
+#: the commands and their one-line help (``jaxcrank --help`` lists them without importing JAX)
+COMMANDS = {
+    "simulate": "simulate the clearance mechanism and write data, summary and figures",
+    "sweep": "simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo), alone or in vmap batches",
+    "optimize": "minimise the RMS transmission-angle error (paper Eq. 19) or a design objective with optax",
+}
 
 
-def _simulate_parser(sub):
-    p = sub.add_parser(
-        "simulate",
-        help="simulate the clearance mechanism and write data, summary and figures",
-        description="Simulate the offset slider-crank with clearance joints (paper defaults unless "
-        "--config/--set say otherwise) and write trajectory.csv, config.toml, "
-        "summary.json and figures/ into --out.",
+def _simulate_parser(p):
+    """Add ``simulate``'s options to its parser ``p``."""
+    from ..numerics.solve import DEFAULTS, SOLVERS
+
+    p.description = (
+        "Simulate the offset slider-crank with clearance joints (paper defaults unless "
+        "--config/--design/--set say otherwise) and write trajectory.csv, config.toml, "
+        "summary.json and figures/ into --out."
     )
-    p.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
+    base = p.add_mutually_exclusive_group()
+    base.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
+    base.add_argument(
+        "--design",
+        type=Path,
+        metavar="RESULT_JSON",
+        help="simulate the final design of a `jaxcrank optimize` run, e.g. --design runs/optimize/result.json",
+    )
     p.add_argument("--out", type=Path, default=Path("runs/paper"), help="run directory (default: runs/paper)")
     p.add_argument(
         "--set",
@@ -37,7 +50,8 @@ def _simulate_parser(sub):
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a parameter, e.g. --set rod_length=0.41 --set contact.law=flores (repeatable)",
+        help="override a parameter (SI), as the library names it, e.g. --set rod_length=0.41 "
+        "--set clearance_B=2e-4 --set contact.law=flores (repeatable)",
     )
     p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
     p.add_argument("--t1", type=float, default=0.4, help="simulated time, s (default 0.4 = 4 revolutions at 600 rpm)")
@@ -74,12 +88,14 @@ def run_simulate(args) -> int:
     import numpy as np
 
     from ..analysis import outputs
-
-    from . import plots
-
     from ..numerics import solve
+    from ..physics.params import ParameterError, paper
+    from . import config, plots
 
-    mech = config.load(args.config) if args.config else paper()
+    if args.design:
+        mech = config.load_design(args.design)
+    else:
+        mech = config.load(args.config) if args.config else paper()
     overrides = list(args.overrides)
     if args.rpm is not None:
         overrides.append(f"crank_speed={2.0 * math.pi * args.rpm / 60.0!r}")
@@ -197,15 +213,14 @@ device is used (a GPU machine's GPUs). Several machines: see docs/sweeps.md, "On
 """
 
 
-def _sweep_parser(sub):
-    p = sub.add_parser(
-        "sweep",
-        help="simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo), alone or in vmap batches",
-        description="Run a sweep over mechanism parameters and write table.csv (one row per design: "
-        "parameters, status, headline metrics), summary.json and figures/ into --out.",
-        epilog=SWEEP_SPEC_HELP,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+def _sweep_parser(p):
+    """Add ``sweep``'s options to its parser ``p``."""
+    p.description = (
+        "Run a sweep over mechanism parameters and write table.csv (one row per design: "
+        "parameters, status, headline metrics), summary.json and figures/ into --out."
     )
+    p.epilog = SWEEP_SPEC_HELP
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.add_argument("--spec", type=Path, required=True, help="sweep spec TOML (see below)")
     p.add_argument("--out", type=Path, default=Path("runs/sweep"), help="output directory (default runs/sweep)")
     p.add_argument("--resume", action="store_true", help="continue the sweep in --out where it stopped")
@@ -232,7 +247,7 @@ def run_sweep(args) -> int:
     import jax
 
     from ..analysis import metrics
-
+    from ..physics.params import parameter_unit
     from . import plots, sweep
     from . import spec as spec_module
 
@@ -306,22 +321,44 @@ def _versions():
     }
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="jaxcrank", description="Differentiable slider-crank with joint clearances.")
-    parser.add_argument("--version", action="version", version=f"jaxcrank {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-    _simulate_parser(sub)
-    _sweep_parser(sub)
-    from optim import cli as optim_cli
+def parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``jaxcrank`` argument parser; only ``command``'s options are added (the others'
+    subparsers carry their one-line help), so that naming no command imports no JAX."""
+    top = argparse.ArgumentParser(prog="jaxcrank", description="Differentiable slider-crank with joint clearances.")
+    top.add_argument("--version", action="version", version=f"jaxcrank {__version__}")
+    sub = top.add_subparsers(dest="command", required=True)
+    for name, help_ in COMMANDS.items():
+        p = sub.add_parser(name, help=help_)
+        if name != command:
+            continue
+        if name == "simulate":
+            _simulate_parser(p)
+        elif name == "sweep":
+            _sweep_parser(p)
+        else:
+            from optim import cli as optim_cli
 
-    optim_cli.add_parser(sub)
-    args = parser.parse_args(argv)
+            optim_cli.add_arguments(p)
+    return top
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = next((a for a in argv if not a.startswith("-")), None)  # the first word names the command
+    args = parser(command if command in COMMANDS else None).parse_args(argv)
+
+    from ..errors import CorruptFileError
+    from ..numerics.solve import SimulationError
+    from ..physics.params import ParameterError
+
     try:
         if args.command == "simulate":
             return run_simulate(args)
         if args.command == "sweep":
             return run_sweep(args)
         if args.command == "optimize":
+            from optim import cli as optim_cli
+
             return optim_cli.run(args)
     except (ParameterError, SimulationError, CorruptFileError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)

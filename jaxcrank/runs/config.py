@@ -5,6 +5,11 @@ The file mirrors the pytree: top-level keys are the mechanism's scalar fields,
 tables ``[joint_B]``, ``[joint_C]``, ``[crank_material]``, ``[rod_material]``,
 ``[slider_material]``, ``[contact]``, ``[friction]`` its parts. Every value is SI
 (see :class:`~jaxcrank.physics.params.Mechanism`). Unknown keys and wrong types are errors.
+
+The parameter names are the library's (:func:`jaxcrank.physics.params.set_parameter`):
+besides the fields and dotted paths, the top-level keys ``clearance_B`` and
+``clearance_C`` set a joint's radial clearance (m; the pin shrinks, the hole stays), in
+a file and on the command line (``jaxcrank simulate --set clearance_B=2e-4``) alike.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ _PARTS = {
 # laws are Modules in Python and names in TOML / on the command line
 _LAWS = {"contact": ("contact law", CONTACT_LAWS), "friction": ("friction law", FRICTION_LAWS)}
 _BOOL_FIELDS = {"ideal"}
+#: the library's clearance names (top-level keys here): radial clearance c = hole_radius - pin_radius, m
+_CLEARANCES = {"clearance_B": "joint_B", "clearance_C": "joint_C"}
 
 
 def _fields(cls):
@@ -80,10 +87,20 @@ def _convert(section: str, key: str, value):
 
 def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
     """Build a validated Mechanism from a (possibly partial) nested dict; missing
-    keys keep the values of ``base`` (default: the paper preset)."""
+    keys keep the values of ``base`` (default: the paper preset). The top-level keys
+    ``clearance_B`` / ``clearance_C`` (m) set the pin radius to the joint's hole radius
+    (the one ``data`` gives, else the base's) minus the clearance.
+
+    Raises:
+        ParameterError: for an unknown key, a wrong type or a value out of its range
+            (a clearance outside (0, hole_radius), or given with that joint's pin_radius).
+    """
     merged = to_dict(Mechanism() if base is None else base)
+    clearances = {}
     for key, value in data.items():
-        if key in _PARTS:
+        if key in _CLEARANCES:
+            clearances[key] = _convert("", key, value)
+        elif key in _PARTS:
             if not isinstance(value, dict):
                 raise ParameterError(f"[{key}] must be a table of parameters, got {value!r}")
             for sub, v in value.items():
@@ -95,7 +112,10 @@ def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
         elif key in merged:
             merged[key] = _convert("", key, value)
         else:
-            raise ParameterError(f"unknown parameter {key!r}; valid top-level keys: {', '.join(merged)}")
+            valid = ", ".join([*merged, *_CLEARANCES])
+            raise ParameterError(f"unknown parameter {key!r}; valid top-level keys: {valid}")
+    for key, c in clearances.items():
+        _set_clearance(merged, data, key, c)
     for section in _LAWS:  # the base's laws, written as names by to_dict
         if isinstance(merged[section]["law"], str):
             merged[section]["law"] = _convert(section, "law", merged[section]["law"])
@@ -109,6 +129,20 @@ def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
         except ParameterError as err:  # name the table: "youngs_modulus" alone does not say whose
             raise ParameterError(f"[{k}] {err}") from None
     return Mechanism(**kwargs)
+
+
+def _set_clearance(merged: dict, data: dict, key: str, c: float) -> None:
+    """Set ``merged``'s pin radius of the joint that ``key`` (``clearance_B`` / ``clearance_C``)
+    names to ``hole_radius - c``; the hole radius is the one ``data`` sets, else the base's."""
+    joint = _CLEARANCES[key]
+    if "pin_radius" in data.get(joint, {}):
+        raise ParameterError(f"{key} and {joint}.pin_radius both set the pin radius: give one of them")
+    hole = merged[joint]["hole_radius"]
+    if not 0.0 < c < hole:
+        raise ParameterError(
+            f"{key} = {c:g} m is out of range: the radial clearance must lie in (0, {joint}.hole_radius = {hole:g} m)"
+        )
+    merged[joint]["pin_radius"] = hole - c
 
 
 def load_toml(path, build):
@@ -127,6 +161,28 @@ def load_toml(path, build):
 def load(path) -> Mechanism:
     """Read a TOML config; raises ParameterError naming the file on malformed input."""
     return load_toml(path, from_dict)
+
+
+def load_design(path) -> Mechanism:
+    """The final design of a ``jaxcrank optimize`` run: the mechanism in the ``final_mechanism``
+    table of its ``result.json`` (SI, as :func:`to_dict` writes it).
+
+    Raises:
+        ParameterError: naming the file if it is not JSON or has no valid ``final_mechanism``.
+    """
+    import json
+
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ParameterError(f"{path}: not a JSON file: {err}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("final_mechanism"), dict):
+        raise ParameterError(f"{path}: no 'final_mechanism' table; pass the result.json of a `jaxcrank optimize` run")
+    try:
+        return from_dict(data["final_mechanism"])
+    except ParameterError as err:
+        raise ParameterError(f"{path}: {err}") from None
 
 
 def dumps(mech: Mechanism) -> str:
@@ -155,7 +211,12 @@ def parse_override(text: str) -> tuple[list[str], object]:
 
 
 def apply_overrides(mech: Mechanism, overrides: list[str]) -> Mechanism:
-    """Apply ``key=value`` overrides (dotted keys for tables) and re-validate."""
+    """Apply ``key=value`` overrides (dotted keys for tables; ``clearance_B`` /
+    ``clearance_C`` in m, see :func:`from_dict`) and re-validate.
+
+    Raises:
+        ParameterError: on a malformed override, an unknown name or an invalid value.
+    """
     data: dict = {}
     for text in overrides:
         path, value = parse_override(text)

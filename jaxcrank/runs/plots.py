@@ -8,9 +8,55 @@ import matplotlib.pyplot as plt
 import numpy as np  # noqa: E402
 
 
+def _steady(cols) -> np.ndarray:
+    """Samples after the first crank revolution (the start-up impacts left out), bool; all
+    samples for a run that ends within it."""
+    turned = np.abs(np.asarray(cols["crank_angle"]) - cols["crank_angle"][0])
+    after = turned >= 360.0
+    return after if after.any() else np.ones_like(after)
+
+
+def _clip_startup(ax, t, curves, steady, unit):
+    """Limit ``ax``'s y-range to the curves' values after the start-up (``steady`` samples)
+    and shade the start-up; a peak outside that range is written in the axes and
+    marked by an arrow at the edge it crosses, so the steady motion is legible."""
+    if steady.all():
+        return
+    lo = min(float(np.min(c[steady])) for c in curves)
+    hi = max(float(np.max(c[steady])) for c in curves)
+    pad = 0.08 * (hi - lo if hi > lo else max(abs(hi), 1.0))
+    lo, hi = lo - pad, hi + pad
+    ax.set_ylim(lo, hi)
+    ax.axvspan(t[0], t[np.argmax(steady)], color="0.9", zorder=0, lw=0)
+    # the largest excursion of any curve beyond the range, written and pointed at
+    worst = None
+    for c in curves:
+        outside = (c > hi) | (c < lo)
+        if outside.any():
+            i = int(np.argmax(np.where(outside, np.abs(c), -np.inf)))
+            if worst is None or abs(c[i]) > abs(worst[1]):
+                worst = (t[i], float(c[i]))
+    if worst is not None:
+        ti, vi = worst
+        edge = hi if vi > hi else lo
+        ax.annotate(
+            f"start-up (shaded): peak {vi:,.0f} {unit} at t = {ti:.4f} s, off scale",
+            xy=(ti, edge),
+            xytext=(0.12, 0.9 if vi > hi else 0.1),
+            textcoords="axes fraction",
+            fontsize=7,
+            va="center",
+            bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "0.6", "lw": 0.5},
+            arrowprops={"arrowstyle": "->", "lw": 0.7},
+        )
+
+
 def _ideal_vs_clearance(cols, prefix, title):
-    """3x2 grid: position, velocity, acceleration; left ideal and clearance, right error."""
+    """3x2 grid: position, velocity, acceleration; left ideal and clearance, right error.
+    The acceleration rows are scaled to the motion after the first revolution (shaded
+    before), the start-up peak annotated."""
     t = cols["t"]
+    steady = _steady(cols)
     fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True)
     rows = [("x", "position", 1e3, "mm"), ("vx", "velocity", 1.0, "m/s"), ("ax", "acceleration", 1.0, "m/s$^2$")]
     for row, (suffix, label, scale, unit) in enumerate(rows):
@@ -21,6 +67,9 @@ def _ideal_vs_clearance(cols, prefix, title):
         ax.set_ylabel(f"{label} x [{unit}]")
         axes[row, 1].plot(t, real - ideal, lw=0.7, color="C3")
         axes[row, 1].set_ylabel(f"error [{unit}]")
+        if suffix == "ax":
+            _clip_startup(ax, t, [real, ideal], steady, "m/s²")
+            _clip_startup(axes[row, 1], t, [real - ideal], steady, "m/s²")
     axes[0, 0].legend(loc="upper right", fontsize=8)
     axes[0, 0].set_title(f"{title}: ideal vs clearance")
     axes[0, 1].set_title(f"{title}: deviation (clearance - ideal)")
@@ -30,7 +79,9 @@ def _ideal_vs_clearance(cols, prefix, title):
     return fig
 
 
-def _single(cols, series, ylabel, title):
+def _single(cols, series, ylabel, title, unit):
+    """One panel of ``series`` (column, label, style) against time, scaled to the motion
+    after the first revolution (start-up shaded, its peak annotated)."""
     fig, ax = plt.subplots(figsize=(9, 4))
     for key, label, style in series:
         ax.plot(
@@ -41,10 +92,27 @@ def _single(cols, series, ylabel, title):
             color=style.get("color"),
             label=label,
         )
+    _clip_startup(ax, cols["t"], [cols[key] for key, _, _ in series], _steady(cols), unit)
     ax.set_xlabel("t [s]")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def _contact_forces(cols):
+    """Normal contact force at C (the paper's Fig. 7) and at B, one panel each, scaled to
+    the motion after the first revolution (start-up shaded, its peak annotated)."""
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    steady = _steady(cols)
+    for ax, joint, color, what in zip(axes, "CB", ("C0", "C1"), ("paper Fig. 7", "crank pin")):
+        f = cols[f"force_{joint}_normal"]
+        ax.plot(cols["t"], f, lw=0.6, color=color)
+        _clip_startup(ax, cols["t"], [f], steady, "N")
+        ax.set_ylabel(f"normal force at {joint} [N]")
+        ax.set_title(f"contact force, joint {joint} ({what})")
+    axes[-1].set_xlabel("t [s]")
     fig.tight_layout()
     return fig
 
@@ -82,7 +150,13 @@ def _transmission(cols):
 
 
 def figures(cols, clearances) -> dict:
-    """All figures as ``{file name: matplotlib Figure}``. ``clearances``: {"B": m, "C": m}."""
+    """All figures as ``{file name: matplotlib Figure}``. ``cols``: the columns of
+    :func:`jaxcrank.analysis.outputs.trajectory`; ``clearances``: {"B": m, "C": m}.
+
+    Accelerations, contact forces and the driving moment are scaled to the motion after
+    the first crank revolution (the start-up impact, about 50 times larger on the paper
+    run, would squash it): the first revolution is shaded and its peak written in the
+    panel. A run shorter than one revolution is drawn whole."""
     return {
         "rod_x.png": _ideal_vs_clearance(cols, "rod", "rod centre (paper Fig. 4)"),
         "slider_x.png": _ideal_vs_clearance(cols, "slider", "slider (paper Fig. 5)"),
@@ -91,13 +165,9 @@ def figures(cols, clearances) -> dict:
             [("slider_ax", "with clearance", {}), ("ideal_slider_ax", "ideal", {"ls": "--", "color": "k", "lw": 1.2})],
             "slider acceleration x [m/s$^2$]",
             "slider acceleration (paper Fig. 6)",
+            "m/s²",
         ),
-        "contact_force.png": _single(
-            cols,
-            [("force_C_normal", "joint C", {}), ("force_B_normal", "joint B", {"lw": 0.5})],
-            "normal contact force [N]",
-            "contact forces (paper Fig. 7: joint C)",
-        ),
+        "contact_force.png": _contact_forces(cols),
         "driving_moment.png": _single(
             cols,
             [
@@ -106,6 +176,7 @@ def figures(cols, clearances) -> dict:
             ],
             "driving moment [N m]",
             "driving moment (paper Fig. 8)",
+            "N m",
         ),
         "pin_trajectories.png": _pin_trajectories(cols, clearances),
         "transmission_angle.png": _transmission(cols),

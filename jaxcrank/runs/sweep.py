@@ -69,11 +69,11 @@ from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float, Int, Shaped
 from tqdm.auto import tqdm
 
-from . import config
-from ..errors import CorruptFileError
 from ..analysis.metrics import METRICS
-from ..physics.params import Mechanism, ParameterError, parameter_unit, set_parameters
+from ..errors import CorruptFileError
 from ..numerics.solve import DEFAULTS, SolveOptions, simulate
+from ..physics.params import Mechanism, ParameterError, parameter_unit, set_parameters
+from . import config
 
 STATUSES = ("ok", "max_steps", "solver_failed", "non_finite", "invalid")
 _MESSAGES = {
