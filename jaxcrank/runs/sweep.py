@@ -65,7 +65,7 @@ from tqdm.auto import tqdm
 from ..analysis.metrics import METRICS
 from ..errors import CorruptFileError
 from ..physics.params import Mechanism, ParameterError, set_parameters
-from .sweep_design import MESSAGES, STATUSES, Settings, simulate_design, validate
+from .sweep_design import MESSAGES, SOLVE_KEYS, STATUSES, Settings, SweepSettings, simulate_design, validate
 from .sweep_dispatch import (
     batch_bytes,
     check_chunk_fits,
@@ -80,8 +80,10 @@ from .sweep_workers import run_in_workers
 
 __all__ = [
     "METRICS",
+    "SOLVE_KEYS",
     "STATUSES",
     "Settings",
+    "SweepSettings",
     "batch_bytes",
     "check_chunk_fits",
     "chunk_that_fits",

@@ -1,11 +1,11 @@
-"""One design of a sweep: how it is simulated (:class:`Settings`), its solve
+"""One design of a sweep: how it is simulated (:class:`SweepSettings`), its solve
 (:func:`simulate_design`) and its status codes (:data:`STATUSES`)."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import diffrax
 import jax.numpy as jnp
@@ -27,9 +27,13 @@ MESSAGES = {
 }
 
 
+#: the ``[simulation]`` keys of a sweep spec that are :class:`jaxcrank.numerics.solve.SolveOptions` fields
+SOLVE_KEYS = ("solver", "rtol", "atol", "max_steps")
+
+
 @dataclasses.dataclass(frozen=True)
-class Settings:
-    """How every design of a sweep is simulated.
+class SweepSettings:
+    """How every design of a sweep is simulated (also reachable as ``Settings``).
 
     Attributes:
         revolutions: simulated crank revolutions from the pins-centred start
@@ -37,8 +41,8 @@ class Settings:
         samples_per_revolution: output samples per revolution (3600: every 0.1 deg,
             as ``jaxcrank simulate``); peaks are taken over these samples.
         metrics_from_revolution: metrics cover t > this many revolutions (default 1).
-        solver, rtol, atol, max_steps: the fields of :class:`jaxcrank.numerics.solve.SolveOptions`
-            (same defaults), flat here so a sweep spec's ``[simulation]`` table names them.
+        options: the solver settings (:class:`jaxcrank.numerics.solve.SolveOptions`,
+            default :data:`jaxcrank.numerics.solve.DEFAULTS`).
 
     Raises:
         ParameterError: for a setting out of its range.
@@ -47,13 +51,10 @@ class Settings:
     revolutions: float = 4.0
     samples_per_revolution: int = 3600
     metrics_from_revolution: float = 1.0
-    solver: str = DEFAULTS.solver
-    rtol: float = DEFAULTS.rtol
-    atol: float = DEFAULTS.atol
-    max_steps: int = DEFAULTS.max_steps
+    options: SolveOptions = DEFAULTS
 
     def __post_init__(self):
-        for name in ("revolutions", "samples_per_revolution", "metrics_from_revolution", "rtol", "atol", "max_steps"):
+        for name in ("revolutions", "samples_per_revolution", "metrics_from_revolution"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
                 raise ParameterError(f"{name} = {v!r} must be a finite number")
@@ -66,12 +67,40 @@ class Settings:
             )
         if int(self.samples_per_revolution) < 4:
             raise ParameterError(f"samples_per_revolution = {self.samples_per_revolution} must be >= 4")
-        _ = self.options  # validates solver, rtol, atol and max_steps
+        if not isinstance(self.options, SolveOptions):
+            raise ParameterError(f"options = {self.options!r} must be a jaxcrank.SolveOptions")
 
-    @property
-    def options(self) -> SolveOptions:
-        """The solver settings as :class:`jaxcrank.numerics.solve.SolveOptions`."""
-        return DEFAULTS.replace(solver=self.solver, rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
+    @classmethod
+    def from_text(cls, table: Mapping) -> SweepSettings:
+        """Settings from a sweep spec's ``[simulation]`` table: the fields above but
+        ``options``, and the solver settings :data:`SOLVE_KEYS` (the solver by name).
+
+        Raises:
+            ParameterError: for an unknown key (the message lists the valid ones) or a
+                value out of its range.
+        """
+        own = [f.name for f in dataclasses.fields(cls) if f.name != "options"]
+        valid = sorted(own + list(SOLVE_KEYS))
+        if set(table) - set(valid):
+            raise ParameterError(f"unknown [simulation] keys {sorted(set(table) - set(valid))}; valid: {valid}")
+        solve_changes = {k: table[k] for k in SOLVE_KEYS if k in table}
+        for k, v in solve_changes.items():
+            if v is None:
+                raise ParameterError(f"{k} = {v!r} must be set")
+        options = SolveOptions.from_text(**solve_changes)
+        return cls(**{k: table[k] for k in own if k in table}, options=options)
+
+    def to_text(self) -> dict:
+        """The flat ``[simulation]`` table of :meth:`from_text` (solver by name)."""
+        return {
+            "revolutions": self.revolutions,
+            "samples_per_revolution": self.samples_per_revolution,
+            "metrics_from_revolution": self.metrics_from_revolution,
+            "solver": self.options.solver_name,
+            "rtol": self.options.rtol,
+            "atol": self.options.atol,
+            "max_steps": self.options.max_steps,
+        }
 
     @property
     def n_samples(self) -> int:
@@ -88,7 +117,7 @@ class Settings:
 
 
 def simulate_design(
-    base: Mechanism, names: Sequence[str], x: Float[ArrayLike, " params"], settings: Settings = Settings()
+    base: Mechanism, names: Sequence[str], x: Float[ArrayLike, " params"], settings: SweepSettings = SweepSettings()
 ) -> tuple[dict[str, Float[Array, ""]], Int[Array, ""], Int[Array, ""]]:
     """One design: ``base`` with ``names`` set to ``x`` (SI), simulated with
     ``throw=False``. Returns (metrics dict, status code (index into
@@ -117,3 +146,7 @@ def validate(mech: Mechanism) -> Mechanism:
     """Re-check every parameter of ``mech`` (raises :class:`ParameterError` naming
     the parameter and its range): ``set_parameter`` does not re-validate."""
     return config.from_dict(config.to_dict(mech))
+
+
+#: The name sweeps have used for :class:`SweepSettings`.
+Settings = SweepSettings
