@@ -12,9 +12,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from . import config
 from ..analysis.metrics import METRICS
 from ..physics.params import Mechanism, ParameterError, get_parameter, parameter_unit
+from . import config
 from .sampling import Tolerance, full_factorial, latin_hypercube, monte_carlo, one_at_a_time, random_uniform
 from .sweep import Settings
 

@@ -104,7 +104,7 @@ def run(
     base: Mechanism,
     names: Sequence[str],
     designs: Float[ArrayLike, "designs params"],
-    settings: Settings = Settings(),
+    settings: Settings | None = None,
     *,
     out=None,
     resume: bool = False,
@@ -118,7 +118,7 @@ def run(
         base: the mechanism every design starts from.
         names: parameter names (see :func:`jaxcrank.physics.params.set_parameter`).
         designs: (N, len(names)) parameter values, SI.
-        settings: how each design is simulated.
+        settings: how each design is simulated (default :class:`SweepSettings`).
         out: directory for ``table.csv`` and ``designs.npy``, appended after every
             batch; without it the table is only returned.
         resume: continue the sweep in ``out``: designs already in the table are
@@ -131,6 +131,7 @@ def run(
             the fastest on a CPU); 1 solves in this process. Not with ``jax.distributed``.
         progress: tqdm progress bar.
     """
+    settings = SweepSettings() if settings is None else settings
     names = list(names)
     designs = np.atleast_2d(np.asarray(designs, dtype=float))
     if designs.shape[1] != len(names):

@@ -12,10 +12,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from . import config
 from ..analysis.metrics import METRICS
-from ..physics.params import Mechanism, ParameterError, set_parameters
 from ..numerics.solve import DEFAULTS, SolveOptions, simulate
+from ..physics.params import Mechanism, ParameterError, set_parameters
+from . import config
 
 #: Status of a design in a sweep table; :func:`simulate_design` returns an index into it.
 STATUSES = ("ok", "max_steps", "solver_failed", "non_finite", "invalid")
@@ -117,11 +117,12 @@ class SweepSettings:
 
 
 def simulate_design(
-    base: Mechanism, names: Sequence[str], x: Float[ArrayLike, " params"], settings: SweepSettings = SweepSettings()
+    base: Mechanism, names: Sequence[str], x: Float[ArrayLike, " params"], settings: SweepSettings | None = None
 ) -> tuple[dict[str, Float[Array, ""]], Int[Array, ""], Int[Array, ""]]:
     """One design: ``base`` with ``names`` set to ``x`` (SI), simulated with
     ``throw=False``. Returns (metrics dict, status code (index into
     :data:`STATUSES`), accepted steps). Traceable; :func:`run` vmaps it."""
+    settings = SweepSettings() if settings is None else settings
     mech = set_parameters(base, names, x)
     # metrics tracked during the solve: no sample is stored (memory per design is
     # independent of samples_per_revolution)
