@@ -23,6 +23,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .. import _private
 from ..physics import model
 from ..physics.params import Mechanism, ParameterError
 from . import tracking
@@ -189,7 +190,7 @@ def _with_tolerances(solver, controller):
     if not isinstance(solver, diffrax.AbstractImplicitSolver):
         return solver
     finder = solver.root_finder
-    names = [n for n in ("rtol", "atol", "norm") if type(getattr(finder, n)).__name__ == "_UseStepSizeTol"]
+    names = [n for n in ("rtol", "atol", "norm") if _private.is_stepsize_controller_tolerance(getattr(finder, n))]
     return eqx.tree_at(
         lambda s: tuple(getattr(s.root_finder, n) for n in names), solver, tuple(getattr(controller, n) for n in names)
     )
