@@ -6,11 +6,13 @@ reads the metric definitions of ``analysis.metrics``, which need the physics alo
 
 - ``jaxcrank.physics``: ``params``, ``laws``, ``ideal``, ``model``, ``reference``;
 - ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``;
-- ``jaxcrank.analysis``: ``metrics``, ``outputs``, ``impact``, ``audit``;
+- ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
+  ``analysis.validation`` (``wall_impact``, ``memory_audit``);
 - ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
 
 Each module is also reachable by its short name (``jaxcrank.outputs``,
-``from jaxcrank import sweep``); those not imported here load on first use.
+``from jaxcrank import sweep``; the rigs as ``jaxcrank.impact`` and ``jaxcrank.audit``);
+those not imported here load on first use.
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -50,17 +52,17 @@ from .runs import config, sampling  # noqa: E402
 
 #: Short names of the modules that ``import jaxcrank`` does not load: each loads on first use.
 _LAZY = {
-    "reference": "physics",
-    "linalg": "numerics",
-    "rosenbrock": "numerics",
-    "tracking": "numerics",
-    "impact": "analysis",
-    "audit": "analysis",
-    "sweep": "runs",
-    "spec": "runs",
-    "cache": "runs",
-    "plots": "runs",
-    "cli": "runs",
+    "reference": "physics.reference",
+    "linalg": "numerics.linalg",
+    "rosenbrock": "numerics.rosenbrock",
+    "tracking": "numerics.tracking",
+    "impact": "analysis.validation.wall_impact",
+    "audit": "analysis.validation.memory_audit",
+    "sweep": "runs.sweep",
+    "spec": "runs.spec",
+    "cache": "runs.cache",
+    "plots": "runs.plots",
+    "cli": "runs.cli",
 }
 
 
@@ -68,7 +70,7 @@ def __getattr__(name: str):
     if name in _LAZY:
         import importlib
 
-        return importlib.import_module(f"{__name__}.{_LAZY[name]}.{name}")
+        return importlib.import_module(f"{__name__}.{_LAZY[name]}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

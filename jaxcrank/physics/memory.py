@@ -7,7 +7,7 @@ weights the time derivative of :func:`memory_target`), it freezes in contact, an
 relaxes onto its target away from the wall (:func:`memory_relaxation`). Like the laws
 in :mod:`jaxcrank.physics.laws` these are small pure functions of physical
 arguments; :func:`jaxcrank.physics.contact.approach_memory_rate` assembles them into
-d(memory)/dt, for the mechanism and for the free pin of :mod:`jaxcrank.analysis.impact`
+d(memory)/dt, for the mechanism and for the free pin of :mod:`jaxcrank.analysis.validation.wall_impact`
 alike.
 """
 
