@@ -51,6 +51,7 @@ import numpy as np
 
 from jaxcrank.analysis.metrics import RMS_METRICS, by_name
 from jaxcrank.analysis.metrics import stack as metrics_stack
+from jaxcrank.numerics.estimators import straight_through
 from jaxcrank.physics.params import ParameterError, get_parameter, paper, set_parameters
 
 from .objective import Objective, over_windows, stored_solve, tracked_solve, window_starts, windows_ok
@@ -339,7 +340,7 @@ class DesignProblem(Problem):
         sums, ok = over_windows(lambda i: window_sums(self.base, names, values, starts, i, n_window, dt, obj), starts)
         n_ok = windows_ok(ok, obj)
         surrogate = _terms(jnp.sum(ok[:, None] * sums, axis=0) / (n_window * n_ok))
-        return sg(exact) + (surrogate - sg(surrogate))
+        return straight_through(exact, surrogate)
 
 
 #: the design preset's variables: (name, lower, upper, start), SI

@@ -49,6 +49,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, Real
 
 from jaxcrank import laws, model
 from jaxcrank.analysis.outputs import transmission_angle_error
+from jaxcrank.numerics.estimators import straight_through
 from jaxcrank.numerics.solve import DEFAULTS, Simulation, simulate
 from jaxcrank.physics.params import Mechanism, ParameterError
 
@@ -369,9 +370,7 @@ def value(mech: Mechanism, obj: Objective = Objective()) -> Float[Array, ""]:
     if obj.method == "pathwise":
         return pathwise(mech, obj)
     exact, starts = reference(mech, obj)
-    estimate = ensemble(mech, starts, obj)
-    sg = jax.lax.stop_gradient
-    return exact + (estimate - sg(estimate))
+    return straight_through(exact, ensemble(mech, starts, obj))
 
 
 def forward_mode(obj: Objective) -> bool:
