@@ -10,6 +10,10 @@ reads the metric definitions of ``analysis.metrics``, which need the physics alo
   ``analysis.validation`` (``wall_impact``, ``memory_audit``);
 - ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
 
+Importing jaxcrank turns on float64 and adds two XLA CPU options to ``XLA_FLAGS``
+(:mod:`jaxcrank.numerics.runtime`): a documented, process-wide decision; what it changes
+for other JAX code in the process is measured in the docs ("XLA runtime options").
+
 Each module is also reachable by its short name (``jaxcrank.outputs``,
 ``from jaxcrank import sweep``; the rigs as ``jaxcrank.impact`` and ``jaxcrank.audit``);
 those not imported here load on first use.
