@@ -150,7 +150,7 @@ def reduce_signal(reduction: str, x: Float[Array, " n"], window: Float[Array, " 
     if reduction == "max":
         return jnp.max(jnp.where(window, x, -jnp.inf))
     if reduction == "rms":
-        n = jnp.maximum(jnp.sum(window), 1)
+        n = jnp.maximum(jnp.sum(window), 1).astype(x.dtype)
         return jnp.sqrt(jnp.sum(jnp.where(window, x**2, 0.0)) / n)
     raise ValueError(f"unknown reduction {reduction!r}; valid: 'max_abs', 'max', 'rms'")
 

@@ -84,7 +84,7 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
         """The k-th sample time, s (the last one exactly ``last_sample``)."""
         n = self.n_samples
         step = (self.last_sample - self.first_sample) / (n - 1)
-        return jnp.where(k >= n - 1, self.last_sample, self.first_sample + k * step)
+        return jnp.where(k >= n - 1, self.last_sample, self.first_sample + jnp.asarray(k, dtype=step.dtype) * step)
 
     @property
     def term_structure(self):
@@ -147,7 +147,7 @@ def finish(running: Running) -> dict[str, Array]:
     ``peak_contact_force_{B,C}_whole_run_N``) from the accumulators of a finished
     solve; units as in the names. A window without samples gives an RMS of 0."""
     out = metrics.by_name(metrics.PEAK_METRICS, running.peaks)
-    n = jnp.maximum(running.count, 1)[..., None]
+    n = jnp.maximum(running.count, 1)[..., None].astype(running.sums.dtype)
     out.update(metrics.by_name(metrics.RMS_METRICS, jnp.sqrt(running.sums / n)))
     whole_run = metrics.by_name(metrics.PEAK_METRICS, running.whole_run_peaks)
     for joint in "BC":
