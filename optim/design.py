@@ -339,7 +339,7 @@ class DesignProblem(Problem):
         names, values = self.physical(x)
         sums, ok = over_windows(lambda i: window_sums(self.base, names, values, starts, i, n_window, dt, obj), starts)
         n_ok = windows_ok(ok, obj)
-        surrogate = _terms(jnp.sum(ok[:, None] * sums, axis=0) / (n_window * n_ok))
+        surrogate = _terms(jnp.sum(ok[:, None].astype(sums.dtype) * sums, axis=0) / (n_window * n_ok))
         return straight_through(exact, surrogate)
 
 

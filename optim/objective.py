@@ -163,7 +163,7 @@ def stored_solve(mech: Mechanism, obj: Objective, throw: bool, grid) -> tuple[Si
     ``grid`` (:meth:`Objective.grid`): the simulation and the sample index of t_start
     (the samples in (t_start, t_end] follow it). Differentiable in reverse mode."""
     n_start, n_eval, _, dt = grid
-    ts = dt * jnp.arange(n_start + n_eval + 1)
+    ts = dt * jnp.arange(n_start + n_eval + 1, dtype=float)
     return simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=throw), n_start
 
 
@@ -332,7 +332,7 @@ WINDOWS_FAILED = (
 def windows_ok(ok: Bool[Array, " windows"], obj: Objective) -> Real[Array, ""]:
     """The number of finished windows (a scalar); fewer than half of ``ok`` raises
     (``obj.on_failure = "raise"``) or makes it NaN (``"nan"``)."""
-    n_ok = jnp.sum(ok)
+    n_ok = jnp.sum(ok, dtype=float)
     enough = n_ok >= 0.5 * ok.shape[0]
     if obj.on_failure == "raise":
         return eqx.error_if(n_ok, ~enough, WINDOWS_FAILED)
