@@ -2,7 +2,7 @@
 
 At every contact onset the approach speed the damping uses (the memory, floored at
 ``contact.min_approach_speed``) is compared with the true normal speed just before
-onset (:mod:`jaxcrank.analysis.audit`). Default tolerances, 0.4 s; the paper preset and the
+onset (:mod:`jaxcrank.analysis.validation.memory_audit`). Default tolerances, 0.4 s; the paper preset and the
 issue's setting (Hunt-Crossley, Ambrosio's friction ramp). Then the cost: the solver's
 accepted and rejected steps of the 0.4 s run (tsit5, default tolerances) of each setting,
 and over an ensemble of runs with the restitution 0.9 +- 5e-3 in steps of 1e-4 (101 runs;
@@ -12,7 +12,7 @@ the step count of one run is chaotic: a 1e-4 change of restitution moves it by u
     python bench/audit_memory.py [--t1 0.4] [--no-steps] [--before FILE]
 
 The "before" step counts are this script run with the jaxcrank of commit a11de35
-(``git checkout a11de35 -- jaxcrank``; it has no ``jaxcrank.analysis.audit``: the step counts
+(``git checkout a11de35 -- jaxcrank``; it has no ``jaxcrank.analysis.validation.memory_audit``: the step counts
 only, ``--no-audit``), written to ``audit_memory_steps_a11de35.json``. ``--before FILE``
 compares with such a file: the ratio of the ensemble medians (after / before) with a
 95 % bootstrap interval (10 000 resamples of each ensemble).

@@ -6,11 +6,17 @@ reads the metric definitions of ``analysis.metrics``, which need the physics alo
 
 - ``jaxcrank.physics``: ``params``, ``laws``, ``ideal``, ``model``, ``reference``;
 - ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``;
-- ``jaxcrank.analysis``: ``metrics``, ``outputs``, ``impact``, ``audit``;
+- ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
+  ``analysis.validation`` (``wall_impact``, ``memory_audit``);
 - ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
 
+Importing jaxcrank turns on float64 and adds two XLA CPU options to ``XLA_FLAGS``
+(:mod:`jaxcrank.numerics.runtime`): a documented, process-wide decision; what it changes
+for other JAX code in the process is measured in the docs ("XLA runtime options").
+
 Each module is also reachable by its short name (``jaxcrank.outputs``,
-``from jaxcrank import sweep``); those not imported here load on first use.
+``from jaxcrank import sweep``; the rigs as ``jaxcrank.impact`` and ``jaxcrank.audit``);
+those not imported here load on first use.
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -25,7 +31,15 @@ jax.config.update("jax_enable_x64", True)
 from .analysis import metrics, outputs  # noqa: E402
 from .errors import CorruptFileError  # noqa: E402
 from .numerics import solve  # noqa: E402
-from .numerics.solve import DEFAULTS, SOLVERS, Simulation, SimulationError, SolveOptions, simulate  # noqa: E402
+from .numerics.solve import (  # noqa: E402
+    DEFAULTS,
+    SOLVERS,
+    Simulation,
+    SimulationError,
+    SolveOptions,
+    simulate,
+    solver_from_name,
+)
 from .physics import ideal, laws, model, params  # noqa: E402
 from .physics.laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
 from .physics.params import (  # noqa: E402
@@ -42,17 +56,17 @@ from .runs import config, sampling  # noqa: E402
 
 #: Short names of the modules that ``import jaxcrank`` does not load: each loads on first use.
 _LAZY = {
-    "reference": "physics",
-    "linalg": "numerics",
-    "rosenbrock": "numerics",
-    "tracking": "numerics",
-    "impact": "analysis",
-    "audit": "analysis",
-    "sweep": "runs",
-    "spec": "runs",
-    "cache": "runs",
-    "plots": "runs",
-    "cli": "runs",
+    "reference": "physics.reference",
+    "linalg": "numerics.linalg",
+    "rosenbrock": "numerics.rosenbrock",
+    "tracking": "numerics.tracking",
+    "impact": "analysis.validation.wall_impact",
+    "audit": "analysis.validation.memory_audit",
+    "sweep": "runs.sweep",
+    "spec": "runs.spec",
+    "cache": "runs.cache",
+    "plots": "runs.plots",
+    "cli": "runs.cli",
 }
 
 
@@ -60,7 +74,7 @@ def __getattr__(name: str):
     if name in _LAZY:
         import importlib
 
-        return importlib.import_module(f"{__name__}.{_LAZY[name]}.{name}")
+        return importlib.import_module(f"{__name__}.{_LAZY[name]}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -95,6 +109,7 @@ __all__ = [
     "sampling",
     "simulate",
     "solve",
+    "solver_from_name",
     "with_clearance",
     "__version__",
 ]

@@ -49,6 +49,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, Real
 
 from jaxcrank import laws, model
 from jaxcrank.analysis.outputs import transmission_angle_error
+from jaxcrank.numerics.estimators import straight_through
 from jaxcrank.numerics.solve import DEFAULTS, Simulation, simulate
 from jaxcrank.physics.params import Mechanism, ParameterError
 
@@ -162,7 +163,7 @@ def stored_solve(mech: Mechanism, obj: Objective, throw: bool, grid) -> tuple[Si
     ``grid`` (:meth:`Objective.grid`): the simulation and the sample index of t_start
     (the samples in (t_start, t_end] follow it). Differentiable in reverse mode."""
     n_start, n_eval, _, dt = grid
-    ts = dt * jnp.arange(n_start + n_eval + 1)
+    ts = dt * jnp.arange(n_start + n_eval + 1, dtype=float)
     return simulate(mech, ts=ts, rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps, throw=throw), n_start
 
 
@@ -331,7 +332,7 @@ WINDOWS_FAILED = (
 def windows_ok(ok: Bool[Array, " windows"], obj: Objective) -> Real[Array, ""]:
     """The number of finished windows (a scalar); fewer than half of ``ok`` raises
     (``obj.on_failure = "raise"``) or makes it NaN (``"nan"``)."""
-    n_ok = jnp.sum(ok)
+    n_ok = jnp.sum(ok, dtype=float)
     enough = n_ok >= 0.5 * ok.shape[0]
     if obj.on_failure == "raise":
         return eqx.error_if(n_ok, ~enough, WINDOWS_FAILED)
@@ -369,9 +370,7 @@ def value(mech: Mechanism, obj: Objective = Objective()) -> Float[Array, ""]:
     if obj.method == "pathwise":
         return pathwise(mech, obj)
     exact, starts = reference(mech, obj)
-    estimate = ensemble(mech, starts, obj)
-    sg = jax.lax.stop_gradient
-    return exact + (estimate - sg(estimate))
+    return straight_through(exact, ensemble(mech, starts, obj))
 
 
 def forward_mode(obj: Objective) -> bool:

@@ -1,5 +1,5 @@
 """The approach-speed memory against the true normal speed at every contact onset of
-a run (:mod:`jaxcrank.analysis.audit`); the 0.4 s distribution is in docs/numerics.md
+a run (:mod:`jaxcrank.analysis.validation.memory_audit`); the 0.4 s distribution is in docs/numerics.md
 (``python bench/audit_memory.py``)."""
 
 import numpy as np

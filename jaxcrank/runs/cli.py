@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import json
 import platform
 import sys
@@ -59,7 +58,10 @@ def _simulate_parser(p):
         "--samples-per-degree", type=float, default=10.0, help="output samples per degree of crank angle (default 10)"
     )
     p.add_argument(
-        "--solver", choices=sorted(SOLVERS), default=DEFAULTS.solver, help=f"ODE solver (default {DEFAULTS.solver})"
+        "--solver",
+        choices=sorted(SOLVERS),
+        default=DEFAULTS.solver_name,
+        help=f"ODE solver (default {DEFAULTS.solver_name})",
     )
     p.add_argument(
         "--rtol",
@@ -110,7 +112,7 @@ def run_simulate(args) -> int:
     config.save(mech, out / "config.toml")
 
     start = time.perf_counter()
-    options = solve.SolveOptions(solver=args.solver, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+    options = solve.SolveOptions.from_text(solver=args.solver, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     # Metrics after the first revolution (the start-up impacts left out); a run that
     # ends within it is summarised over its whole length, and says so.
     period = float(mech.period)
@@ -287,7 +289,7 @@ def run_sweep(args) -> int:
             "processes": jax.process_count(),
             "workers": args.workers,
             "chunk": chunk,
-            "settings": dataclasses.asdict(spec.settings),
+            "settings": spec.settings.to_text(),
             "versions": _versions(),
             "metric_meanings": metrics.meanings(),
         }

@@ -1,5 +1,5 @@
-"""Audit of the approach-speed memory: at every contact onset of a run, the approach
-speed the damping uses against the true normal speed just before onset.
+"""Validation rig, audit of the approach-speed memory: at every contact onset of a run,
+the approach speed the damping uses against the true normal speed just before onset.
 
 The contact laws divide by ``delta_dot_minus``, the normal speed at the onset of an
 impact (model.md); jaxcrank carries it as a memory state per clearance joint
@@ -19,15 +19,15 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import diffrax
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from ..numerics import solve
-from ..physics import laws, model
-from ..physics.params import Mechanism
+from ...numerics import solve
+from ...physics import laws, model
+from ...physics.params import Mechanism
+from .events import crossings, dense_solve
 
 
 class Onsets(NamedTuple):
@@ -95,27 +95,10 @@ def _joint_state(mech: Mechanism, t, y):
     """(penetration, penetration rate, memory) per clearance joint at (t, y), shape (k,) each
     (rate 0 where the pin is centred)."""
     d, d_rate = model.joint_eccentricities(mech, t, y)
-    clearance = jnp.stack([getattr(mech, f"joint_{name}").clearance for name in model.clearance_joints(mech)])
+    clearance = jnp.stack([site.joint(mech).clearance for site in model.clearance_sites(mech)])
     eps = laws.safe_norm(d)
     rate = jnp.sum(d * d_rate, axis=-1) / jnp.where(eps > 0.0, eps, 1.0)
     return eps - clearance, rate, model.unpack(mech, y).approach_memory
-
-
-@eqx.filter_jit
-def _solve_dense(mech, t0, t1, y0, solver, controller, dt0, max_steps):
-    return diffrax.diffeqsolve(
-        diffrax.ODETerm(model.vector_field),
-        solver,
-        t0,
-        t1,
-        dt0,
-        y0,
-        args=mech,
-        saveat=diffrax.SaveAt(steps=True, dense=True),
-        stepsize_controller=controller,
-        max_steps=max_steps,
-        throw=False,
-    )
 
 
 def onsets(
@@ -131,12 +114,11 @@ def onsets(
     """Every contact onset of the run of ``mech`` from ``t0`` to ``t1`` (s) with the
     numerical settings ``options`` (:class:`jaxcrank.SolveOptions`; the step budget
     is ``max_steps``, which also sizes the stored steps). Returns :class:`Onsets`."""
-    solver = solve.make_solver(options.solver)
+    solver = options.solver
     controller = solve.step_size_controller(solver, options.rtol, options.atol)
     y0 = model.initial_state(mech) if y0 is None else y0
-    sol = _solve_dense(
-        mech, jnp.asarray(t0, float), jnp.asarray(t1, float), y0, solver, controller, options.dt0, max_steps
-    )
+    t0_, t1_ = jnp.asarray(t0, float), jnp.asarray(t1, float)
+    sol = dense_solve(model.vector_field, solver, t0_, t1_, options.dt0, y0, mech, controller, max_steps, steps=True)
     if sol.result != diffrax.RESULTS.successful:
         raise solve.SimulationError(f"audit solve failed: {sol.result}")
     n = int(sol.stats["num_accepted_steps"])
@@ -153,11 +135,7 @@ def onsets(
         down = np.flatnonzero((p[:-1] >= 0.0) & (p[1:] < 0.0))
         if up.size == 0:
             continue
-        lo, hi = ts[up].copy(), ts[up + 1].copy()
-        for _ in range(bisections):
-            mid = 0.5 * (lo + hi)
-            below = np.asarray(state_at(jnp.asarray(mid))[0][:, j]) < 0.0
-            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+        _, hi = crossings(lambda t, j=j: np.asarray(state_at(jnp.asarray(t))[0][:, j]), ts, p, bisections=bisections)
         _, rate, memory = state_at(jnp.asarray(hi))
         # separation times: located to step precision (enough for "time since")
         sep_t = 0.5 * (ts[down] + ts[down + 1])

@@ -1,5 +1,6 @@
-"""Impacts of a free pin on a bearing wall, through the same joint model as the
-mechanism (:func:`jaxcrank.physics.model.joint_contact` and its approach-speed memory).
+"""Validation rig: impacts of a free pin on a bearing wall, through the same joint model
+as the mechanism (:func:`jaxcrank.physics.contact.joint_contact` and its approach-speed
+memory).
 Used to check each contact law's achieved restitution against the exact relation
 ``chi (1 + e) = ln((1 + chi) / (1 - chi e))`` (model.md):
 
@@ -22,12 +23,14 @@ from typing import NamedTuple
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ..physics import model
-from ..physics.params import Mechanism
+from ...physics import model
+from ...physics.params import Mechanism
+from .events import crossings, dense_solve
 
 
 @eqx.filter_jit
@@ -55,60 +58,48 @@ def rebound_ratio(
 # --------------------------------------------------------------------------- moving wall
 
 
-def _wall_field(mech: Mechanism, pin_mass, breaks, accelerations):
-    """dy/dt of y = (pin x, pin v, hole x, hole v, memory) for a free pin in joint B's
-    bearing whose hole moves along x with acceleration ``accelerations[i]`` (m/s^2)
-    on [breaks[i], breaks[i + 1]) and zero outside [breaks[0], breaks[-1])."""
+def _hole_acceleration(t, breaks, accelerations):
+    """The hole's acceleration, m/s^2: ``accelerations[i]`` on [breaks[i], breaks[i + 1]),
+    zero outside [breaks[0], breaks[-1])."""
+    i = jnp.searchsorted(breaks, t, side="right") - 1
+    inside = (i >= 0) & (i < accelerations.shape[0])
+    return jnp.where(inside, accelerations[jnp.clip(i, 0, accelerations.shape[0] - 1)], 0.0)
+
+
+def _wall_field(t, y, args):
+    """dy/dt of y = (pin x, pin v, hole x, hole v, memory) for a free pin (mass
+    ``pin_mass``, kg) in joint B's bearing whose hole moves along x with the piecewise
+    constant acceleration of :func:`_hole_acceleration`; ``args = (mech, pin_mass,
+    breaks, accelerations)``."""
+    mech, pin_mass, breaks, accelerations = args
     joint = mech.joint_B
+    x, v, xh, vh, memory = y
+    motion = model.JointMotion(
+        pin_position=jnp.stack([x, 0.0]),
+        pin_velocity=jnp.stack([v, 0.0]),
+        pin_angular_velocity=0.0,
+        hole_position=jnp.stack([xh, 0.0]),
+        hole_velocity=jnp.stack([vh, 0.0]),
+        hole_angular_velocity=0.0,
+    )
+    contact = model.joint_contact(mech, joint, mech.crank_material, mech.rod_material, motion, memory)
+    a_pin = contact.force_on_pin[0] / pin_mass
+    a_hole = _hole_acceleration(t, breaks, accelerations)
+    memory_rate = model.approach_memory_rate(
+        contact, jnp.stack([v - vh, 0.0]), jnp.stack([a_pin - a_hole, 0.0]), joint.clearance
+    )
+    return jnp.stack([v, a_pin, vh, a_hole, memory_rate])
+
+
+def _solve_wall(mech, pin_mass, breaks, accelerations, y0, t1, rtol, atol):
+    """The free pin's run from 0 to ``t1`` (s) with dense output (Dopri8, steps landing
+    on the ``breaks``); a solve that does not finish raises (diffrax's ``throw``)."""
     breaks = jnp.asarray(breaks, dtype=float)
     accelerations = jnp.asarray(accelerations, dtype=float)
-
-    def hole_acceleration(t):
-        i = jnp.searchsorted(breaks, t, side="right") - 1
-        inside = (i >= 0) & (i < accelerations.shape[0])
-        return jnp.where(inside, accelerations[jnp.clip(i, 0, accelerations.shape[0] - 1)], 0.0)
-
-    def field(t, y, args):
-        x, v, xh, vh, memory = y
-        contact = model.joint_contact(
-            mech,
-            joint,
-            mech.crank_material,
-            mech.rod_material,
-            jnp.stack([x, 0.0]),
-            jnp.stack([v, 0.0]),
-            0.0,
-            jnp.stack([xh, 0.0]),
-            jnp.stack([vh, 0.0]),
-            0.0,
-            memory,
-        )
-        a_pin = contact.force_on_pin[0] / pin_mass
-        a_hole = hole_acceleration(t)
-        # the memory's rate as in model.dynamics: relaxation + tracking * d(target)/dt
-        target_rate = model.memory_target_rate(
-            contact.eccentricity, jnp.stack([v - vh, 0.0]), jnp.stack([a_pin - a_hole, 0.0]), joint.clearance
-        )
-        memory_rate = contact.memory_rate + contact.memory_tracking * target_rate
-        return jnp.stack([v, a_pin, vh, a_hole, memory_rate])
-
-    return field
-
-
-@eqx.filter_jit
-def _solve_wall(mech, pin_mass, breaks, accelerations, y0, t1, rtol, atol):
-    field = _wall_field(mech, pin_mass, breaks, accelerations)
-    return diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
-        diffrax.Dopri8(),
-        0.0,
-        t1,
-        1e-9,
-        y0,
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=jnp.asarray(breaks, dtype=float)),
-        saveat=diffrax.SaveAt(t1=True, dense=True),
-        max_steps=400_000,
-    )
+    controller = diffrax.PIDController(rtol=rtol, atol=atol, jump_ts=breaks)
+    args = (mech, pin_mass, breaks, accelerations)
+    y0 = jnp.asarray(y0, dtype=float)
+    return dense_solve(_wall_field, diffrax.Dopri8(), 0.0, t1, 1e-9, y0, args, controller, 400_000, throw=True)
 
 
 def _penetration(mech, y):
@@ -117,22 +108,12 @@ def _penetration(mech, y):
 
 def _crossings(mech, sol, t0, t1, n=4000, upward=True):
     """Times in (t0, t1) where the penetration crosses zero upwards (or downwards),
-    located by bisection on the dense output."""
+    bracketed on ``n`` equally spaced times and located by bisection on the dense
+    output (:func:`jaxcrank.analysis.validation.events.crossings`)."""
+    penetration = jax.jit(jax.vmap(lambda t: _penetration(mech, sol.evaluate(t))))
     ts = np.linspace(t0, t1, n)
-    pen = np.asarray(_penetration(mech, np.asarray([np.asarray(sol.evaluate(t)) for t in ts])))
-    if upward:
-        idx = np.flatnonzero((pen[:-1] < 0.0) & (pen[1:] >= 0.0))
-    else:
-        idx = np.flatnonzero((pen[:-1] >= 0.0) & (pen[1:] < 0.0))
-    out = []
-    for i in idx:
-        lo, hi = ts[i], ts[i + 1]
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            below = float(_penetration(mech, np.asarray(sol.evaluate(mid)))) < 0.0
-            lo, hi = (mid, hi) if below == upward else (lo, mid)
-        out.append(hi if upward else lo)
-    return out
+    lo, hi = crossings(penetration, ts, penetration(ts), upward=upward)
+    return list(hi if upward else lo)
 
 
 class WallImpact(NamedTuple):

@@ -1,0 +1,124 @@
+"""The model's parts (jaxcrank.physics: joints, state, kinematics, memory, contact,
+dynamics), each against a fact: closed-form contracts, inverses, time derivatives by
+autodiff of the closed form, the ideal mechanism."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcrank as jc
+from jaxcrank.physics import ideal, joints, kinematics, memory, model, state
+
+
+def _ideal(mech, *names):
+    for site in joints.JOINTS:
+        if site.name in names:
+            j = site.joint(mech)
+            mech = eqx.tree_at(site.joint, mech, jc.Joint(j.hole_radius, j.pin_radius, ideal=True))
+    return mech
+
+
+LAYOUTS = [(), ("B",), ("C",), ("B", "C")]
+
+
+@pytest.mark.parametrize("ideal_names", LAYOUTS)
+def test_state_layout_follows_the_clearance_joints(paper, ideal_names):
+    mech = _ideal(paper, *ideal_names)
+    names = model.clearance_joints(mech)
+    assert names == tuple(n for n in "BC" if n not in ideal_names)
+    k = len(names)
+    assert state.n_dof(mech) == 2 * k and state.state_size(mech) == 4 * k + k + 2
+    y = jnp.arange(1.0, state.state_size(mech) + 1.0)
+    s = state.unpack(mech, y)
+    phys = y * state.state_scales(mech)
+    np.testing.assert_array_equal(np.concatenate([s.deviation, s.deviation_rate, s.approach_memory]), phys[:-2])
+    assert float(s.driver_work) == float(phys[-2]) and float(s.dissipated_work) == float(phys[-1])
+
+
+@pytest.mark.parametrize("ideal_names", [("B",), ("C",)])
+def test_an_ideal_joints_pin_holds_its_rod_end(paper, ideal_names):
+    """For any deviation s, the ideal joint's pin and rod end coincide, and so do their
+    velocities (1e-12 m, 1e-9 m/s)."""
+    mech = _ideal(paper, *ideal_names)
+    (site,) = [s for s in joints.JOINTS if s.name in ideal_names]
+    rng = np.random.default_rng(0)
+    for t in (0.0, 0.0123, 0.07):
+        s, sd = rng.normal(size=2) * 1e-4, rng.normal(size=2) * 1e-2
+        q, qd, _ = kinematics.coordinates(mech, jnp.asarray(s), jnp.asarray(sd), t)
+        m = site.motion(mech, q, qd, t)
+        np.testing.assert_allclose(m.pin_position, m.hole_position, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(m.pin_velocity, m.hole_velocity, rtol=0, atol=1e-9)
+
+
+def test_state_from_eccentricities_inverts_eccentricities(paper):
+    t = 0.0123
+    d = jnp.array([[1e-4, -5e-5], [-3e-5, 8e-5]])
+    d_rate = jnp.array([[1e-2, 3e-3], [-2e-3, 5e-3]])
+    rest = jnp.array([0.1, 0.2, 3.0, 0.5])
+    y = kinematics.state_from_eccentricities(paper, t, d, d_rate, rest)
+    d2, d2_rate = kinematics.eccentricities(paper, t, y)
+    np.testing.assert_allclose(d2, d, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(d2_rate, d_rate, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(model.auxiliary(paper, y), rest, rtol=1e-15)
+    with pytest.raises(ValueError, match="needs clearance at both B and C"):
+        kinematics.eccentricities(_ideal(paper, "B"), t, jnp.zeros(state.state_size(_ideal(paper, "B"))))
+
+
+def test_memory_tracking_weight_contract():
+    """w = 1 for x >= 1, 0 for x <= 0; the deficit 1 - w and x (1 - w) integrate to zero
+    over [0, 1] (Gauss-Legendre with 8 points: exact for w, a polynomial of degree 10)."""
+    assert float(memory.memory_tracking(1.0)) == 1.0 and float(memory.memory_tracking(3.0)) == 1.0
+    assert float(memory.memory_tracking(0.0)) == 0.0 and float(memory.memory_tracking(-2.0)) == 0.0
+    x, w = np.polynomial.legendre.leggauss(8)
+    x, w = 0.5 * (x + 1.0), 0.5 * w
+    deficit = 1.0 - np.asarray(memory.memory_tracking(jnp.asarray(x)))
+    assert abs(np.sum(w * deficit)) < 1e-14 and abs(np.sum(w * x * deficit)) < 1e-14
+
+
+def test_memory_relaxation_is_zero_near_contact_and_the_memory_rate_far_away(paper):
+    c = paper.contact
+    for x in (-1.0, 0.0, 0.5, 1.0):
+        assert float(memory.memory_relaxation(x, c)) == 0.0
+    far = 3.0 * float(c.reset_window / c.freeze_time)
+    np.testing.assert_allclose(float(memory.memory_relaxation(far, c)), 1.0 / float(c.memory_time), rtol=1e-15)
+
+
+@pytest.mark.parametrize("eccentricity", [[2e-4, 1e-4], [1e-5, -2e-5]])  # outside and inside c/2
+def test_memory_target_rate_is_the_time_derivative_of_the_target(eccentricity):
+    """Along d(t) = d0 + v t + a t^2 / 2, memory_target_rate equals d/dt memory_target
+    (forward-mode autodiff of the closed form), 1e-12 relative."""
+    d0, v, a, c = jnp.asarray(eccentricity), jnp.array([0.3, -0.1]), jnp.array([-40.0, 25.0]), 2.5e-4
+
+    def target(t):
+        return memory.memory_target(d0 + v * t + 0.5 * a * t**2, v + a * t, c)
+
+    _, exact = jax.jvp(target, (0.0,), (1.0,))
+    np.testing.assert_allclose(float(memory.memory_target_rate(d0, v, a, c)), float(exact), rtol=1e-12)
+
+
+def test_a_separated_pin_feels_no_force_and_a_penetrating_one_is_pushed_back(paper):
+    joint = paper.joint_B
+    c = float(joint.clearance)
+
+    def contact(offset):
+        motion = joints.JointMotion(
+            jnp.array([offset, 0.0]), jnp.array([0.1, 0.0]), 0.0, jnp.zeros(2), jnp.zeros(2), 0.0
+        )
+        return model.joint_contact(paper, joint, paper.crank_material, paper.rod_material, motion, jnp.asarray(0.1))
+
+    apart, touching = contact(0.5 * c), contact(c + 1e-6)
+    assert float(apart.normal_force) == 0.0 and float(apart.friction_force) == 0.0
+    np.testing.assert_allclose(float(apart.penetration), -0.5 * c, rtol=1e-12)
+    assert float(touching.normal_force) > 0.0 and float(touching.force_on_pin[0]) < 0.0
+
+
+def test_with_both_joints_ideal_the_dynamics_is_the_ideal_mechanism(paper):
+    mech = _ideal(paper, "B", "C")
+    for t in (0.0, 0.0123, 0.05):
+        dyn = model.dynamics(mech, t, model.initial_state(mech))
+        q, qd, qdd = ideal.kinematics(mech, t)
+        np.testing.assert_allclose(dyn.q, q, rtol=1e-14)
+        np.testing.assert_allclose(dyn.qdd, qdd, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(float(dyn.driving_moment), float(ideal.driving_moment(mech, t)), rtol=1e-10)
