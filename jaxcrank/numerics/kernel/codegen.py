@@ -1,0 +1,498 @@
+"""Scalar C code from a JAX function's jaxpr: the kernel's single source of truth.
+
+:func:`emit_function` traces a function of fixed-shape float64 arrays with
+:func:`jax.make_jaxpr` and writes it as one straight-line C function: every array
+element becomes a scalar local (``const double vN = ...;``); slicing, reshaping,
+broadcasting, stacking and concatenation only rearrange names and emit nothing;
+dot products and reductions are written out as sums. Nested ``jit`` and
+custom-derivative calls are inlined (their primal jaxpr). Only primitives with an
+exact scalar C translation are accepted; anything else raises
+:class:`UnsupportedPrimitive` naming it, so a model change that needs a new
+primitive fails loudly at generation time, never silently in the kernel.
+
+Rounding follows XLA's CPU lowering where it is cheap to do so: ``integer_pow`` is
+the same chain of multiplications, ``max``/``min`` propagate NaN, ``rsqrt`` is
+``1 / sqrt``. Sums of dot products may associate differently from XLA (a few ulp).
+The generated text is valid C99 and CUDA C++ (functions are declared with the
+``KFN`` macro, which the including source defines).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.extend import core as jex_core
+
+
+class UnsupportedPrimitive(NotImplementedError):
+    """The traced function uses a primitive the generator cannot write as scalar C."""
+
+
+_BINARY = {"add": "+", "add_any": "+", "sub": "-", "mul": "*", "div": "/"}
+_COMPARE = {"gt": ">", "lt": "<", "ge": ">=", "le": "<=", "eq": "==", "ne": "!="}
+_UNARY = {
+    "sin": "sin",
+    "cos": "cos",
+    "tan": "tan",
+    "acos": "acos",
+    "atan": "atan",
+    "sinh": "sinh",
+    "cosh": "cosh",
+    "tanh": "tanh",
+    "exp": "exp",
+    "log": "log",
+    "log1p": "log1p",
+    "expm1": "expm1",
+    "sqrt": "sqrt",
+    "cbrt": "cbrt",
+    "abs": "fabs",
+    "floor": "floor",
+    "ceil": "ceil",
+}
+_IDENTITY = {"stop_gradient", "copy", "copy_p", "optimization_barrier", "reduce_precision"}
+_CALLS = {"jit", "pjit", "closed_call", "core_call", "remat", "checkpoint", "custom_jvp_call", "custom_vjp_call"}
+
+
+def literal(value) -> str:
+    """A C literal of a float, int or bool (infinities and NaN as the prelude's macros)."""
+    if isinstance(value, (bool, np.bool_)):
+        return "1" if value else "0"
+    if isinstance(value, (int, np.integer)):
+        return f"{int(value)}L"
+    v = float(value)
+    if math.isnan(v):
+        return "KNAN"
+    if math.isinf(v):
+        return "KINF" if v > 0 else "(-KINF)"
+    text = repr(v)
+    return text if ("e" in text or "." in text) else text + ".0"
+
+
+def _value(expr):
+    """The Python value of a literal written by :func:`literal`, or None for a C expression."""
+    if not isinstance(expr, str):
+        return None
+    if expr.endswith("L") and expr[:-1].lstrip("-").isdigit():
+        return int(expr[:-1])
+    if expr in ("0", "1"):
+        return expr == "1"
+    try:
+        return float(expr)
+    except ValueError:
+        return None
+
+
+_FOLD = {
+    "+": lambda a, b: a + b,
+    "-": lambda a, b: a - b,
+    "*": lambda a, b: a * b,
+    ">": lambda a, b: a > b,
+    "<": lambda a, b: a < b,
+    ">=": lambda a, b: a >= b,
+    "<=": lambda a, b: a <= b,
+    "==": lambda a, b: a == b,
+    "!=": lambda a, b: a != b,
+}
+
+
+def _ctype(dtype) -> str:
+    dtype = np.dtype(dtype)
+    if dtype == np.bool_:
+        return "int"
+    if np.issubdtype(dtype, np.integer):
+        return "long"
+    if dtype != np.float64:
+        raise UnsupportedPrimitive(f"dtype {dtype}: the kernel computes in float64 only")
+    return "double"
+
+
+class _Writer:
+    """Emits C statements and names their results."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+        self.count = 0
+
+    def new(self, expr: str, dtype) -> str:
+        name = f"v{self.count}"
+        self.count += 1
+        self.lines.append(f"  const {_ctype(dtype)} {name} = {expr};")
+        return name
+
+
+def _array(x) -> np.ndarray:
+    return np.asarray(x, dtype=object)
+
+
+def _elementwise(w: _Writer, fmt: Callable[..., str], dtype, *args) -> np.ndarray:
+    arrays = np.broadcast_arrays(*[_array(a) for a in args])
+    out = np.empty(arrays[0].shape, dtype=object)
+    for idx in np.ndindex(out.shape):
+        out[idx] = w.new(fmt(*[a[idx] for a in arrays]), dtype)
+    return out
+
+
+def _integer_pow(w: _Writer, x: str, y: int, dtype) -> str:
+    """``x ** y`` as XLA computes it: binary exponentiation, a reciprocal for y < 0."""
+    if y == 0:
+        return literal(1.0)
+    if y in (1, 2, 3):
+        return x if y == 1 else w.new(f"{x} * {x}" if y == 2 else f"({x} * {x}) * {x}", dtype)
+    if y == -1:
+        return w.new(f"1.0 / {x}", dtype)
+    recip, n, acc, base = y < 0, abs(y), None, x
+    while n > 0:
+        if n & 1:
+            acc = base if acc is None else w.new(f"{acc} * {base}", dtype)
+        n >>= 1
+        if n > 0:
+            base = w.new(f"{base} * {base}", dtype)
+    return w.new(f"1.0 / {acc}", dtype) if recip else acc
+
+
+def _sum(w: _Writer, terms: Sequence[str], dtype) -> str:
+    if not terms:
+        return literal(0.0)
+    acc = terms[0]
+    for t in terms[1:]:
+        acc = w.new(f"{acc} + {t}", dtype)
+    return acc
+
+
+def _dot_general(w: _Writer, lhs: np.ndarray, rhs: np.ndarray, params, dtype) -> np.ndarray:
+    (lc, rc), (lb, rb) = params["dimension_numbers"]
+    lf = [d for d in range(lhs.ndim) if d not in lc and d not in lb]
+    rf = [d for d in range(rhs.ndim) if d not in rc and d not in rb]
+    lt = np.transpose(lhs, list(lb) + lf + list(lc))
+    rt = np.transpose(rhs, list(rb) + rf + list(rc))
+    nb, k = len(lb), int(np.prod([lhs.shape[d] for d in lc], dtype=int))
+    batch = lt.shape[:nb]
+    lt = lt.reshape(batch + tuple(lhs.shape[d] for d in lf) + (k,))
+    rt = rt.reshape(batch + tuple(rhs.shape[d] for d in rf) + (k,))
+    lfree, rfree = lt.shape[nb:-1], rt.shape[nb:-1]
+    out = np.empty(batch + lfree + rfree, dtype=object)
+    for b in np.ndindex(batch):
+        for i in np.ndindex(lfree):
+            for j in np.ndindex(rfree):
+                prods = [w.new(f"{lt[b + i + (m,)]} * {rt[b + j + (m,)]}", dtype) for m in range(k)]
+                out[b + i + j] = _sum(w, prods, dtype)
+    return out
+
+
+def _reduce(w: _Writer, x: np.ndarray, axes, combine: Callable[[str, str], str], dtype) -> np.ndarray:
+    keep = [d for d in range(x.ndim) if d not in axes]
+    moved = np.transpose(x, keep + list(axes))
+    shape = moved.shape[: len(keep)]
+    flat = moved.reshape(shape + (-1,))
+    out = np.empty(shape, dtype=object)
+    for idx in np.ndindex(shape):
+        acc = flat[idx + (0,)]
+        for m in range(1, flat.shape[-1]):
+            acc = w.new(combine(acc, flat[idx + (m,)]), dtype)
+        out[idx] = acc
+    return out
+
+
+def _folded(w: _Writer, op: str, dtype, a, b) -> np.ndarray:
+    """An integer or comparison op, computed here when both operands are literals
+    (loop counters of unrolled scans), else emitted."""
+    arrays = np.broadcast_arrays(_array(a), _array(b))
+    out = np.empty(arrays[0].shape, dtype=object)
+    for idx in np.ndindex(out.shape):
+        x, y = arrays[0][idx], arrays[1][idx]
+        vx, vy = _value(x), _value(y)
+        if vx is not None and vy is not None:
+            v = _FOLD[op](vx, vy)
+            out[idx] = literal(bool(v)) if isinstance(v, bool) else literal(v)
+        else:
+            out[idx] = w.new(f"{x} {op} {y}", dtype)
+    return out
+
+
+def _scan(w: _Writer, eqn, ins) -> list[np.ndarray]:
+    """A scan of static length, unrolled."""
+    p = eqn.params
+    if p["reverse"]:
+        raise UnsupportedPrimitive("scan with reverse=True")
+    body, consts = p["jaxpr"].jaxpr, p["jaxpr"].consts
+    nc, nk = p["num_consts"], p["num_carry"]
+    fixed, carry, xs = ins[:nc], list(ins[nc : nc + nk]), ins[nc + nk :]
+    ys = []
+    for i in range(p["length"]):
+        out = _run(w, body, consts, list(fixed) + carry + [x[i] for x in xs])
+        carry, y = out[:nk], out[nk:]
+        ys.append(y)
+    stacked = [np.stack([y[j] for y in ys]) for j in range(len(eqn.outvars) - nk)]
+    return carry + stacked
+
+
+def _argmax(w: _Writer, x: np.ndarray, axes, index_dtype) -> np.ndarray:
+    (axis,) = axes
+    moved = np.moveaxis(x, axis, -1)
+    out = np.empty(moved.shape[:-1], dtype=object)
+    for idx in np.ndindex(out.shape):
+        best, where = moved[idx + (0,)], literal(np.asarray(0, dtype=index_dtype).item())
+        for m in range(1, moved.shape[-1]):
+            v = moved[idx + (m,)]
+            better = w.new(f"{v} > {best} || ({v} != {v} && {best} == {best})", np.bool_)
+            best = w.new(f"{better} ? {v} : {best}", np.float64)
+            where = w.new(f"{better} ? {m}L : {where}", index_dtype)
+        out[idx] = where
+    return out
+
+
+def _starts(w: _Writer, operand: np.ndarray, indices, sizes) -> list:
+    """Start indices clamped into range as XLA does: Python ints when known, else C expressions."""
+    out = []
+    for d, idx in enumerate(indices):
+        hi = operand.shape[d] - sizes[d]
+        i = _array(idx).item()
+        v = _value(i)
+        if v is not None:
+            out.append(min(max(int(v), 0), hi))
+        else:
+            out.append(w.new(f"({i} < 0L ? 0L : ({i} > {hi}L ? {hi}L : {i}))", np.int64))
+    return out
+
+
+def _dynamic_slice(w: _Writer, operand: np.ndarray, indices, sizes, dtype) -> np.ndarray:
+    starts = _starts(w, operand, indices, sizes)
+    out = np.empty(sizes, dtype=object)
+    for idx in np.ndindex(*sizes):
+        options = [[]]
+        for d, s in enumerate(starts):
+            if isinstance(s, int):
+                options = [o + [(s + idx[d], None)] for o in options]
+            else:
+                options = [o + [(k + idx[d], (s, k))] for o in options for k in range(operand.shape[d] - sizes[d] + 1)]
+        expr = None
+        for opt in reversed(options):
+            value = operand[tuple(i for i, _ in opt)]
+            conds = [f"{s} == {k}L" for _, c in opt if c is not None for s, k in [c]]
+            expr = value if expr is None else w.new(f"({' && '.join(conds)}) ? {value} : {expr}", dtype)
+        out[idx] = expr
+    return out
+
+
+def _dynamic_update_slice(w: _Writer, operand: np.ndarray, update: np.ndarray, indices, dtype) -> np.ndarray:
+    starts = _starts(w, operand, indices, update.shape)
+    out = operand.copy()
+    for idx in np.ndindex(operand.shape):
+        conds, inside, src = [], True, []
+        for d, s in enumerate(starts):
+            if isinstance(s, int):
+                k = idx[d] - s
+                inside &= 0 <= k < update.shape[d]
+                src.append([(k, None)])
+            else:
+                src.append([(idx[d] - k, k) for k in range(operand.shape[d] - update.shape[d] + 1)
+                            if 0 <= idx[d] - k < update.shape[d]])
+                conds.append(s)
+        if not inside or any(not opts for opts in src):
+            continue
+        expr = operand[idx]
+        for combo in itertools.product(*src):
+            value = update[tuple(k for k, _ in combo)]
+            terms = [f"{starts[d]} == {c}L" for d, (_, c) in enumerate(combo) if c is not None]
+            expr = value if not terms else w.new(f"({' && '.join(terms)}) ? {value} : {expr}", dtype)
+        out[idx] = expr
+    return out
+
+
+def _read(env: dict, atom) -> np.ndarray:
+    if isinstance(atom, jex_core.Literal):
+        val = np.asarray(atom.val)
+        return np.vectorize(literal, otypes=[object])(val) if val.ndim else _array(literal(val.item()))
+    return env[atom]
+
+
+def _inner(params):
+    for key in ("jaxpr", "call_jaxpr", "fun_jaxpr"):
+        if key in params:
+            inner = params[key]
+            if isinstance(inner, jex_core.ClosedJaxpr):
+                return inner.jaxpr, inner.consts
+            return inner, ()
+    raise UnsupportedPrimitive("a call primitive without a jaxpr")
+
+
+def _constant(value) -> np.ndarray:
+    val = np.asarray(value)
+    if val.ndim == 0:
+        return _array(literal(val.item()))
+    return np.vectorize(literal, otypes=[object])(val)
+
+
+def _run(w: _Writer, jaxpr, consts, args) -> list[np.ndarray]:
+    env: dict = {}
+    for var, c in zip(jaxpr.constvars, consts):
+        env[var] = _constant(c)
+    for var, a in zip(jaxpr.invars, args):
+        env[var] = a
+    for eqn in jaxpr.eqns:
+        ins = [_read(env, v) for v in eqn.invars]
+        outs = _primitive(w, eqn, ins)
+        for var, val in zip(eqn.outvars, outs):
+            env[var] = val
+    return [_read(env, v) for v in jaxpr.outvars]
+
+
+def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
+    name, p = eqn.primitive.name, eqn.params
+    out_aval = eqn.outvars[0].aval if eqn.outvars else None
+    dtype = out_aval.dtype if out_aval is not None else np.float64
+    if name in _CALLS:
+        inner, consts = _inner(p)
+        n = len(inner.invars)
+        return _run(w, inner, consts, ins[len(ins) - n :] if name == "custom_vjp_call" else ins[:n])
+    if name in _IDENTITY:
+        return ins
+    if name in _BINARY or name in _COMPARE:
+        op = _BINARY.get(name) or _COMPARE[name]
+        if np.issubdtype(eqn.invars[0].aval.dtype, np.integer) and op in _FOLD:
+            return [_folded(w, op, dtype, *ins)]
+        return [_elementwise(w, lambda a, b: f"{a} {op} {b}", dtype, *ins)]
+    if name in ("max", "min"):
+        return [_elementwise(w, lambda a, b: f"k{name}({a}, {b})", dtype, *ins)]
+    if name in _UNARY:
+        fn = _UNARY[name]
+        return [_elementwise(w, lambda a: f"{fn}({a})", dtype, *ins)]
+    simple = {
+        "neg": lambda a: f"-{a}",
+        # XLA's decomposition of asin (chlo.asin), not libm's: the same rounding
+        "asin": lambda a: f"2.0 * atan2({a}, 1.0 + sqrt((1.0 - {a}) * (1.0 + {a})))",
+        "square": lambda a: f"{a} * {a}",
+        "rsqrt": lambda a: f"1.0 / sqrt({a})",
+        "sign": lambda a: f"ksign({a})",
+        "not": lambda a: f"!{a}",
+        "is_finite": lambda a: f"kisfinite({a})",
+        "logistic": lambda a: f"1.0 / (1.0 + exp(-{a}))",
+    }
+    if name in simple:
+        return [_elementwise(w, simple[name], dtype, *ins)]
+    if name in ("and", "or"):
+        op = "&&" if name == "and" else "||"
+        if dtype != np.bool_:
+            op = op[0]
+        return [_elementwise(w, lambda a, b: f"{a} {op} {b}", dtype, *ins)]
+    if name in ("pow", "atan2", "nextafter", "rem"):
+        fn = {"pow": "pow", "atan2": "atan2", "nextafter": "nextafter", "rem": "fmod"}[name]
+        return [_elementwise(w, lambda a, b: f"{fn}({a}, {b})", dtype, *ins)]
+    if name == "integer_pow":
+        x = ins[0]
+        out = np.empty(x.shape, dtype=object)
+        for idx in np.ndindex(x.shape):
+            out[idx] = _integer_pow(w, x[idx], int(p["y"]), dtype)
+        return [out]
+    if name == "select_n":
+        pred, *cases = ins
+        if len(cases) != 2:
+            raise UnsupportedPrimitive("select_n with more than two cases")
+        arrays = np.broadcast_arrays(_array(pred), *[_array(c) for c in cases])
+        out = np.empty(arrays[0].shape, dtype=object)
+        for idx in np.ndindex(out.shape):
+            c, a, b = (x[idx] for x in arrays)
+            known = _value(c)
+            out[idx] = (b if known else a) if known is not None else w.new(f"{c} ? {b} : {a}", dtype)
+        return [out]
+    if name == "scan":
+        return _scan(w, eqn, ins)
+    if name == "argmax":
+        return [_argmax(w, ins[0], tuple(p["axes"]), p["index_dtype"])]
+    if name == "dynamic_slice":
+        return [_dynamic_slice(w, ins[0], ins[1:], tuple(p["slice_sizes"]), dtype)]
+    if name == "dynamic_update_slice":
+        return [_dynamic_update_slice(w, ins[0], ins[1], ins[2:], dtype)]
+    if name == "clamp":
+        return [_elementwise(w, lambda lo, x, hi: f"kmin(kmax({x}, {lo}), {hi})", dtype, *ins)]
+    if name == "convert_element_type":
+        ctype = _ctype(p["new_dtype"])
+        src = _ctype(eqn.invars[0].aval.dtype)
+        if ctype == src:
+            return ins
+        fmt = (lambda a: f"{a} != 0") if ctype == "int" else (lambda a: f"({ctype}){a}")
+        return [_elementwise(w, fmt, p["new_dtype"], *ins)]
+    if name == "slice":
+        strides = p["strides"] or (1,) * ins[0].ndim
+        sl = tuple(slice(a, b, s) for a, b, s in zip(p["start_indices"], p["limit_indices"], strides))
+        return [ins[0][sl]]
+    if name == "squeeze":
+        return [np.squeeze(ins[0], axis=tuple(p["dimensions"])) if p["dimensions"] else ins[0]]
+    if name == "expand_dims":
+        return [np.expand_dims(ins[0], tuple(p["dimensions"]))]
+    if name == "reshape":
+        return [ins[0].reshape(p["new_sizes"])]
+    if name == "broadcast_in_dim":
+        x, shape, dims = ins[0], tuple(p["shape"]), tuple(p["broadcast_dimensions"])
+        expanded = x.reshape([x.shape[dims.index(d)] if d in dims else 1 for d in range(len(shape))])
+        return [np.broadcast_to(expanded, shape).copy()]
+    if name == "transpose":
+        return [np.transpose(ins[0], p["permutation"])]
+    if name == "concatenate":
+        return [np.concatenate(ins, axis=p["dimension"])]
+    if name == "stack":
+        return [np.stack(ins, axis=p["axis"])]
+    if name == "rev":
+        return [np.flip(ins[0], axis=tuple(p["dimensions"]))]
+    if name == "iota":
+        shape, dim = tuple(p["shape"]), p["dimension"]
+        idx = np.indices(shape)[dim]
+        return [np.vectorize(lambda v: literal(np.asarray(v, dtype=p["dtype"]).item()), otypes=[object])(idx)]
+    if name == "dot_general":
+        return [_dot_general(w, ins[0], ins[1], p, dtype)]
+    if name == "reduce_sum":
+        return [_reduce(w, ins[0], tuple(p["axes"]), lambda a, b: f"{a} + {b}", dtype)]
+    if name in ("reduce_max", "reduce_min"):
+        fn = "kmax" if name == "reduce_max" else "kmin"
+        return [_reduce(w, ins[0], tuple(p["axes"]), lambda a, b: f"{fn}({a}, {b})", dtype)]
+    raise UnsupportedPrimitive(f"primitive {name!r} has no scalar C translation in jaxcrank.numerics.kernel.codegen")
+
+
+def emit_function(
+    name: str, fn: Callable, inputs: Sequence[tuple[str, tuple[int, ...]]], outputs: Sequence[str]
+) -> tuple[str, list[tuple[int, ...]]]:
+    """Generate ``KFN void name(const double *in0, ..., double *out0, ...)``.
+
+    Args:
+        name: the C function's name.
+        fn: a JAX function of float64 arrays with the shapes of ``inputs``,
+            returning a tuple of arrays (one per entry of ``outputs``).
+        inputs: (C parameter name, shape) per argument of ``fn``; a shape ``()``
+            is passed as a ``double`` by value, others as a flat row-major pointer.
+        outputs: C parameter names of the outputs (flat row-major pointers).
+
+    Returns:
+        (C source of the function, output shapes).
+
+    Raises:
+        UnsupportedPrimitive: naming a primitive without a scalar translation.
+    """
+    examples = [jnp.zeros(shape, dtype=jnp.float64) for _, shape in inputs]
+    closed = jax.make_jaxpr(fn)(*examples)
+    w = _Writer()
+    args = []
+    for arg_name, shape in inputs:
+        if shape == ():
+            args.append(_array(arg_name))
+        else:
+            flat = [f"{arg_name}[{i}]" for i in range(int(np.prod(shape, dtype=int)))]
+            args.append(_array(flat).reshape(shape))
+    results = _run(w, closed.jaxpr, closed.consts, args)
+    if len(results) != len(outputs):
+        raise ValueError(f"{name}: the function returns {len(results)} arrays for {len(outputs)} output names")
+    body = list(w.lines)
+    shapes = []
+    for out_name, res in zip(outputs, results):
+        res = _array(res)
+        shapes.append(res.shape)
+        for i, expr in enumerate(res.reshape(-1)):
+            body.append(f"  {out_name}[{i}] = {expr};")
+    params = [f"double {n}" if s == () else f"const double *KRESTRICT {n}" for n, s in inputs]
+    params += [f"double *KRESTRICT {n}" for n in outputs]
+    head = f"KFN void {name}({', '.join(params)})"
+    return head + " {\n" + "\n".join(body) + "\n}\n", shapes

@@ -1,0 +1,150 @@
+/* The adaptive Tsitouras 5(4) loop of one trajectory, as diffrax 0.7 steps it with
+ * PIDController(pcoeff=0, icoeff=1, norm=rms_norm) and throw=False, plus the headline
+ * metrics of jaxcrank.numerics.tracking.MetricsTracking. Included after the
+ * generated constants (NP, NY, NPEAK, NRMS, TAB_*, controller constants) and the
+ * generated functions jk_field, jk_frame, jk_interp. Valid C99 and CUDA C++. */
+
+#define JK_OK 0
+#define JK_MAX_STEPS 1
+
+KFN double jk_sample_time(long i, long n, double last) {
+  /* MetricsTracking.sample_time with first_sample = 0 */
+  double step = (last - 0.0) / (double)(n - 1);
+  return i >= n - 1 ? last : 0.0 + (double)i * step;
+}
+
+KFN int jk_solve_one(const double *KRESTRICT p, double T1, double t_start, long n_samples, long max_steps,
+                     double rtol, double atol, double dt0, double *KRESTRICT y, double *KRESTRICT peaks,
+                     double *KRESTRICT whole, double *KRESTRICT sums, long *KRESTRICT count,
+                     long *KRESTRICT accepted, long *KRESTRICT rejected) {
+  double f0[NY], f7[NY], k[7 * NY], ys[NY], yerr[NY], rate[NY], pk[NPEAK], rs[NRMS], yi[NY];
+  const double T0 = 0.0;
+  double floor_ = T1;
+  for (int i = 0; i < 100; i++) floor_ = nextafter(floor_, -KINF);
+  for (int j = 0; j < NPEAK; j++) peaks[j] = whole[j] = PEAK_INIT[j];
+  for (int j = 0; j < NRMS; j++) sums[j] = 0.0;
+  long cnt = 0, next_sample = 0, steps = 0, acc = 0, rej = 0;
+  jk_field(p, T0, y, f0);
+  double tprev = T0, tnext = kmin(T0 + dt0, T1);
+  while (tprev < T1 && steps < max_steps) {
+    const double t0 = tprev, t1 = tnext, dt = t1 - t0;
+    for (int i = 0; i < NY; i++) k[i] = f0[i] * dt;
+    for (int s = 1; s < 7; s++) {
+      for (int i = 0; i < NY; i++) {
+        double inc = 0.0;
+        for (int j = 0; j < s; j++) inc += TAB_A[7 * s + j] * k[NY * j + i];
+        ys[i] = y[i] + inc;
+      }
+      const double ts = TAB_C[s] == 1.0 ? t1 : t0 + TAB_C[s] * dt;
+      if (s < 6) {
+        jk_field(p, ts, ys, rate);
+        for (int i = 0; i < NY; i++) k[NY * s + i] = rate[i] * dt;
+      } else { /* stage 7 = (t1, y1): the FSAL rate and the step-end signals */
+        jk_frame(p, ts, ys, f7, pk, rs);
+        for (int i = 0; i < NY; i++) k[NY * s + i] = f7[i] * dt;
+      }
+    }
+    /* error estimate and its scaled RMS norm (NaN errors count as infinite) */
+    int nan1 = 0;
+    for (int i = 0; i < NY; i++) nan1 |= ys[i] != ys[i];
+    double ss = 0.0;
+    for (int i = 0; i < NY; i++) {
+      double e = 0.0;
+      for (int j = 0; j < 7; j++) e += TAB_B_ERR[j] * k[NY * j + i];
+      if (e != e) e = KINF;
+      yerr[i] = e;
+      const double y1c = nan1 ? y[i] : ys[i];
+      const double mag = kmax(fabs(y[i]), fabs(y1c));
+      const double sc = e / (atol + mag * rtol);
+      ss += sc * sc;
+    }
+    const double scaled = sqrt(ss) / NORM_SQRT_N;
+    const int keep = scaled < 1.0;
+    const double inv = 1.0 / scaled;
+    const double fmin_ = keep ? 1.0 : FACTOR_MIN;
+    const double fmax_ = keep ? FACTOR_MAX : SAFETY;
+    const double factor = kmin(kmax(SAFETY * pow(inv, ERROR_EXPONENT), fmin_), fmax_);
+    const double dt_next = dt * factor;
+    const double next_t0 = keep ? t1 : t0;
+    const double next_t1 = next_t0 + dt_next;
+    tprev = kmin(next_t0, T1);
+    tnext = next_t1 > floor_ ? (keep ? T1 : tprev + 0.5 * (T1 - tprev)) : next_t1;
+    if (keep) {
+      const int in_window = t1 > t_start;
+      for (int j = 0; j < NPEAK; j++) {
+        if (in_window) peaks[j] = kmax(peaks[j], pk[j]);
+        whole[j] = kmax(whole[j], pk[j]);
+      }
+      while (next_sample < n_samples && jk_sample_time(next_sample, n_samples, T1) <= t1) {
+        const double tsmp = jk_sample_time(next_sample, n_samples, T1);
+        jk_interp(t0, t1, y, k, tsmp, yi);
+        jk_frame(p, tsmp, yi, rate, pk, rs);
+        if (tsmp > t_start) {
+          for (int j = 0; j < NRMS; j++) sums[j] += rs[j] * rs[j];
+          cnt += 1;
+        }
+        next_sample += 1;
+      }
+      for (int i = 0; i < NY; i++) {
+        y[i] = ys[i];
+        f0[i] = f7[i];
+      }
+      acc += 1;
+    } else {
+      rej += 1;
+    }
+    steps += 1;
+  }
+  *count = cnt;
+  *accepted = acc;
+  *rejected = rej;
+  return tprev < T1 ? JK_MAX_STEPS : JK_OK;
+}
+
+#ifndef __CUDACC__
+/* CPU entry points (ctypes). Rows are designs; every array is row-major. */
+
+int jk_solve(long n, int threads, const double *params, const double *t_end, const double *t_start, long n_samples,
+             long max_steps, double rtol, double atol, double dt0, double *y, double *peaks, double *whole,
+             double *sums, long *count, long *accepted, long *rejected, int *result) {
+  long d;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (d = 0; d < n; d++) {
+    result[d] = jk_solve_one(params + NP * d, t_end[d], t_start[d], n_samples, max_steps, rtol, atol, dt0,
+                             y + NY * d, peaks + NPEAK * d, whole + NPEAK * d, sums + NRMS * d, count + d,
+                             accepted + d, rejected + d);
+  }
+  return 0;
+}
+
+int jk_layout(long *out) {
+  out[0] = NP;
+  out[1] = NY;
+  out[2] = NPEAK;
+  out[3] = NRMS;
+  return 0;
+}
+
+int jk_frame_batch(long n, const double *params, const double *t, const double *y, double *rate, double *peak,
+                   double *rms) {
+  for (long d = 0; d < n; d++) jk_frame(params + NP * d, t[d], y + NY * d, rate + NY * d, peak + NPEAK * d,
+                                        rms + NRMS * d);
+  return 0;
+}
+
+int jk_field_batch(long n, const double *params, const double *t, const double *y, double *rate) {
+  for (long d = 0; d < n; d++) jk_field(params + NP * d, t[d], y + NY * d, rate + NY * d);
+  return 0;
+}
+#else
+extern "C" __global__ void jk_solve_gpu(long n, const double *params, const double *t_end, const double *t_start,
+                                        long n_samples, long max_steps, double rtol, double atol, double dt0,
+                                        double *y, double *peaks, double *whole, double *sums, long *count,
+                                        long *accepted, long *rejected, int *result) {
+  long d = (long)blockIdx.x * blockDim.x + threadIdx.x;
+  if (d >= n) return;
+  result[d] = jk_solve_one(params + NP * d, t_end[d], t_start[d], n_samples, max_steps, rtol, atol, dt0,
+                           y + NY * d, peaks + NPEAK * d, whole + NPEAK * d, sums + NRMS * d, count + d,
+                           accepted + d, rejected + d);
+}
+#endif

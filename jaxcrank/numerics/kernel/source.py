@@ -1,0 +1,173 @@
+"""The kernel's C source for one mechanism structure: generated model functions plus
+the adaptive Tsitouras 5(4) loop of ``solver.c``.
+
+A *structure* (:class:`Structure`) is what changes the traced code: the contact and
+friction laws, which joints are ideal, and the layout of the parameter pytree. Every
+float parameter is a run-time input (a row of the ``params`` matrix, in
+:func:`parameter_vector` order), so one compiled library serves every design of a
+structure, whatever the swept parameters.
+
+Three functions are generated from JAX (:mod:`.codegen`):
+
+- ``jk_field(p, t, y, rate)``: :func:`jaxcrank.physics.model.vector_field`;
+- ``jk_frame(p, t, y, rate, peak, rms)``: the same rate plus the per-step signals of
+  the peak metrics and the RMS metrics (:mod:`jaxcrank.numerics.tracking`'s
+  definitions, from :func:`jaxcrank.physics.model.evaluate`);
+- ``jk_interp(t0, t1, y0, k, t, y)``: diffrax's Tsit5 dense output.
+
+The tableau and the controller's constants are read from diffrax's objects here, so
+the loop steps with the numbers the JAX path uses.
+"""
+
+from __future__ import annotations
+
+import functools
+from importlib import resources
+from typing import NamedTuple
+
+import diffrax
+import jax
+import numpy as np
+
+from ...analysis import metrics
+from ...physics import model
+from ...physics.params import Mechanism
+from .. import tracking
+from . import codegen
+
+
+class Structure(NamedTuple):
+    """What the generated code depends on (hashable): the mechanism with its float
+    parameters replaced by zeros (laws, ideal flags and the pytree layout remain)."""
+
+    skeleton: Mechanism
+
+
+def structure(mech: Mechanism) -> Structure:
+    """The :class:`Structure` of ``mech``."""
+    leaves, treedef = jax.tree_util.tree_flatten(mech)
+    return Structure(jax.tree_util.tree_unflatten(treedef, [0.0] * len(leaves)))
+
+
+def parameter_vector(mech: Mechanism) -> np.ndarray:
+    """The float parameters of ``mech`` in the order the kernel reads them (SI), shape (P,).
+
+    Raises:
+        TypeError: for a leaf that is not a real scalar (the kernel has scalar parameters only).
+    """
+    leaves = jax.tree_util.tree_leaves(mech)
+    out = np.empty(len(leaves))
+    for i, leaf in enumerate(leaves):
+        arr = np.asarray(leaf)
+        if arr.shape != () or not np.issubdtype(arr.dtype, np.number):
+            raise TypeError(f"mechanism leaf {i} is not a real scalar ({leaf!r}); the kernel needs scalar parameters")
+        out[i] = float(arr)
+    return out
+
+
+class Layout(NamedTuple):
+    """Sizes of one structure's generated code (all static)."""
+
+    n_params: int
+    n_state: int
+    n_peak: int
+    n_rms: int
+
+
+def _rebuild(skel: Mechanism, p):
+    treedef = jax.tree_util.tree_structure(skel)
+    return jax.tree_util.tree_unflatten(treedef, [p[i] for i in range(treedef.num_leaves)])
+
+
+def layout(st: Structure) -> Layout:
+    skel = st.skeleton
+    n_params = jax.tree_util.tree_structure(skel).num_leaves
+    return Layout(n_params, model.state_size(skel), len(metrics.PEAK_METRICS), len(metrics.RMS_METRICS))
+
+
+def _functions(st: Structure) -> str:
+    skel = st.skeleton
+    lay = layout(st)
+
+    def field(p, t, y):
+        return (model.vector_field(t, y, _rebuild(skel, p)),)
+
+    def frame(p, t, y):
+        f = model.evaluate(_rebuild(skel, p), t, y)
+        return f.state_rate, tracking._peak_values(f), metrics.rms_signals(f)
+
+    def interp(t0, t1, y0, k, t):
+        return (diffrax.Tsit5.interpolation_cls(t0=t0, t1=t1, y0=y0, y1=y0, k=k).evaluate(t),)
+
+    pin = [("p", (lay.n_params,)), ("t", ()), ("y", (lay.n_state,))]
+    src_field, _ = codegen.emit_function("jk_field", field, pin, ["rate"])
+    src_frame, shapes = codegen.emit_function("jk_frame", frame, pin, ["rate", "peak", "rms"])
+    n = lay.n_state
+    src_interp, _ = codegen.emit_function(
+        "jk_interp", interp, [("t0", ()), ("t1", ()), ("y0", (n,)), ("k", (7, n)), ("t", ())], ["out"]
+    )
+    assert shapes == [(n,), (lay.n_peak,), (lay.n_rms,)], shapes
+    return "\n".join([src_field, src_frame, src_interp])
+
+
+def _array(name: str, values) -> str:
+    vals = ", ".join(codegen.literal(float(v)) for v in np.ravel(values))
+    return f"static KCONST double {name}[{np.size(values)}] = {{{vals}}};"
+
+
+def _constants(st: Structure) -> str:
+    lay = layout(st)
+    tab = diffrax.Tsit5.tableau
+    a = np.zeros((7, 7))
+    for i, row in enumerate(tab.a_lower):
+        a[i + 1, : len(row)] = row
+    c = np.concatenate([[0.0], tab.c])
+    ctrl = diffrax.PIDController(rtol=1.0, atol=1.0, pcoeff=0.0, icoeff=1.0)
+    error_order = diffrax.Tsit5().error_order(diffrax.ODETerm(lambda t, y, a: y))
+    peak_init = np.array(tracking._initial_peaks())
+    return "\n".join(
+        [
+            f"#define NP {lay.n_params}",
+            f"#define NY {lay.n_state}",
+            f"#define NPEAK {lay.n_peak}",
+            f"#define NRMS {lay.n_rms}",
+            _array("TAB_A", a),
+            _array("TAB_C", c),
+            _array("TAB_B_ERR", tab.b_error),
+            _array("PEAK_INIT", peak_init),
+            f"#define SAFETY {codegen.literal(float(ctrl.safety))}",
+            f"#define FACTOR_MIN {codegen.literal(float(ctrl.factormin))}",
+            f"#define FACTOR_MAX {codegen.literal(float(ctrl.factormax))}",
+            f"#define ERROR_EXPONENT {codegen.literal(1.0 / error_order)}",
+            f"#define NORM_SQRT_N {codegen.literal(float(np.sqrt(lay.n_state)))}",
+        ]
+    )
+
+
+PRELUDE = """\
+/* jaxcrank kernel: generated; do not edit */
+#ifdef __CUDACC__
+#define KFN static __device__ __forceinline__
+#define KCONST __device__ const
+#define KRESTRICT __restrict__
+#else
+#include <math.h>
+#define KFN static inline
+#define KCONST const
+#define KRESTRICT restrict
+#endif
+#define KINF (__builtin_inf())
+#define KNAN (__builtin_nan(""))
+KFN double kmax(double a, double b) { return (a != a || b != b) ? a + b : (a > b ? a : b); }
+KFN double kmin(double a, double b) { return (a != a || b != b) ? a + b : (a < b ? a : b); }
+KFN double ksign(double a) { return a > 0.0 ? 1.0 : (a < 0.0 ? -1.0 : a); }
+KFN int kisfinite(double a) { return a - a == 0.0; }
+"""
+
+
+@functools.lru_cache(maxsize=16)
+def kernel_source(st: Structure) -> str:
+    """The complete C source (prelude, constants, generated functions, ``solver.c``)."""
+    loop = resources.files(__package__).joinpath("solver.c").read_text()
+    return "\n".join([PRELUDE, _constants(st), _functions(st), loop])
+
