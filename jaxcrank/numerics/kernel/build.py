@@ -83,13 +83,15 @@ class Compiled:
         lp = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
         ip = np.ctypeslib.ndpointer(dtype=np.int32, flags="C_CONTIGUOUS")
         cl, ci, cd = ctypes.c_long, ctypes.c_int, ctypes.c_double
-        self.lib.jk_solve.argtypes = [cl, ci, dp, dp, dp, cl, cl, cd, cd, cd, dp, dp, dp, dp, lp, lp, lp, ip]
         self.lib.jk_field_batch.argtypes = [cl, dp, dp, dp, dp]
-        self.lib.jk_frame_batch.argtypes = [cl, dp, dp, dp, dp, dp, dp]
-        self.lib.jk_layout.argtypes = [lp]
-        out = np.zeros(4, dtype=np.int64)
-        self.lib.jk_layout(out)
-        self.layout = tuple(int(v) for v in out)
+        self.layout = None
+        if hasattr(self.lib, "jk_solve"):  # a whole kernel (field_source builds the field alone)
+            self.lib.jk_solve.argtypes = [cl, ci, dp, dp, dp, cl, cl, cd, cd, cd, dp, dp, dp, dp, lp, lp, lp, ip]
+            self.lib.jk_frame_batch.argtypes = [cl, dp, dp, dp, dp, dp, dp]
+            self.lib.jk_layout.argtypes = [lp]
+            out = np.zeros(4, dtype=np.int64)
+            self.lib.jk_layout(out)
+            self.layout = tuple(int(v) for v in out)
 
 
 def compile_source(source: str) -> Compiled:

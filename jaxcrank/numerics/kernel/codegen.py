@@ -290,8 +290,13 @@ def _dynamic_update_slice(w: _Writer, operand: np.ndarray, update: np.ndarray, i
                 inside &= 0 <= k < update.shape[d]
                 src.append([(k, None)])
             else:
-                src.append([(idx[d] - k, k) for k in range(operand.shape[d] - update.shape[d] + 1)
-                            if 0 <= idx[d] - k < update.shape[d]])
+                src.append(
+                    [
+                        (idx[d] - k, k)
+                        for k in range(operand.shape[d] - update.shape[d] + 1)
+                        if 0 <= idx[d] - k < update.shape[d]
+                    ]
+                )
                 conds.append(s)
         if not inside or any(not opts for opts in src):
             continue
@@ -437,6 +442,9 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
         return [np.concatenate(ins, axis=p["dimension"])]
     if name == "stack":
         return [np.stack(ins, axis=p["axis"])]
+    if name == "split":
+        cuts = np.cumsum(p["sizes"])[:-1]
+        return list(np.split(ins[0], cuts, axis=p["axis"]))
     if name == "rev":
         return [np.flip(ins[0], axis=tuple(p["dimensions"]))]
     if name == "iota":

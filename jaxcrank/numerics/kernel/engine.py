@@ -109,13 +109,19 @@ def solve_mechanisms(
     for m in mechs[1:]:
         if source.structure(m) != st:
             raise ParameterError("all designs of a kernel batch must share laws and ideal joints (one structure)")
+    return _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, threads)
+
+
+def _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, threads) -> Batch:
+    """Solve the designs whose run-time inputs (``st``'s layout) are the rows of ``params``."""
     if int(n_samples) < 2:
         raise ParameterError(f"n_samples = {n_samples} must be >= 2")
     if not (rtol > 0 and atol > 0 and dt0 > 0 and int(max_steps) >= 1):
         raise ParameterError("rtol, atol and dt0 must be > 0 and max_steps >= 1")
     lib = library(st)
     n_params, n_state, n_peak, n_rms = lib.layout
-    n = len(mechs)
+    n = len(params)
+    params = np.ascontiguousarray(params, dtype=np.float64).reshape(n, n_params)
     y = np.zeros((n, n_state)) if y0 is None else np.array(y0, dtype=np.float64, order="C", copy=True)
     if y.shape != (n, n_state):
         raise ParameterError(f"y0 must have shape ({n}, {n_state}), got {y.shape}")
@@ -146,17 +152,9 @@ def solve(base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, threa
     """
     if settings.solver != "tsit5":
         raise ParameterError(f"the kernel engine solves with tsit5 only, not {settings.solver!r}: use engine='xla'")
-    mechs = [set_parameters(base, list(names), [float(v) for v in x]) for x in np.atleast_2d(xs)]
-    periods = np.array([float(m.period) for m in mechs])
-    options = settings.options
-    return solve_mechanisms(
-        mechs,
-        settings.revolutions * periods,
-        settings.metrics_from_revolution * periods,
-        settings.n_samples,
-        rtol=options.rtol,
-        atol=options.atol,
-        dt0=options.dt0,
-        max_steps=options.max_steps,
-        threads=threads,
-    )
+    xs = np.atleast_2d(np.asarray(xs, dtype=np.float64))
+    periods = np.array([float(set_parameters(base, list(names), [float(v) for v in x]).period) for x in xs])
+    o = settings.options
+    st = source.structure(base, names)  # the parameters that do not vary are compile-time constants
+    t_end, t_start = settings.revolutions * periods, settings.metrics_from_revolution * periods
+    return _run(st, xs, t_end, t_start, settings.n_samples, o.rtol, o.atol, o.dt0, o.max_steps, None, threads)

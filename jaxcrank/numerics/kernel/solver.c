@@ -132,10 +132,6 @@ int jk_frame_batch(long n, const double *params, const double *t, const double *
   return 0;
 }
 
-int jk_field_batch(long n, const double *params, const double *t, const double *y, double *rate) {
-  for (long d = 0; d < n; d++) jk_field(params + NP * d, t[d], y + NY * d, rate + NY * d);
-  return 0;
-}
 #else
 extern "C" __global__ void jk_solve_gpu(long n, const double *params, const double *t_end, const double *t_start,
                                         long n_samples, long max_steps, double rtol, double atol, double dt0,

@@ -22,6 +22,7 @@ the loop steps with the numbers the JAX path uses.
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from importlib import resources
 from typing import NamedTuple
 
@@ -31,22 +32,39 @@ import numpy as np
 
 from ...analysis import metrics
 from ...physics import model
-from ...physics.params import Mechanism
+from ...physics.params import Mechanism, set_parameters
 from .. import tracking
 from . import codegen
 
 
 class Structure(NamedTuple):
-    """What the generated code depends on (hashable): the mechanism with its float
-    parameters replaced by zeros (laws, ideal flags and the pytree layout remain)."""
+    """What the generated code depends on (hashable).
+
+    Attributes:
+        skeleton: the mechanism with its float parameters replaced by zeros (laws,
+            ideal flags and the pytree layout remain).
+        constants: the values of every float parameter, baked into the code as
+            literals (the compiler folds them), with ``names`` the run-time inputs;
+            or ``None``: every float parameter is a run-time input
+            (:func:`parameter_vector` order).
+        names: the parameters (:func:`jaxcrank.physics.params.set_parameter` names)
+            that are run-time inputs when ``constants`` is given.
+    """
 
     skeleton: Mechanism
+    constants: tuple[float, ...] | None = None
+    names: tuple[str, ...] = ()
 
 
-def structure(mech: Mechanism) -> Structure:
-    """The :class:`Structure` of ``mech``."""
+def structure(mech: Mechanism, names: Sequence[str] | None = None) -> Structure:
+    """The :class:`Structure` of ``mech``: every float parameter a run-time input
+    (``names`` None), or ``mech``'s values baked in and only ``names`` as inputs
+    (a sweep over ``names``: per-design code for the parameters that do not vary)."""
     leaves, treedef = jax.tree_util.tree_flatten(mech)
-    return Structure(jax.tree_util.tree_unflatten(treedef, [0.0] * len(leaves)))
+    skeleton = jax.tree_util.tree_unflatten(treedef, [0.0] * len(leaves))
+    if names is None:
+        return Structure(skeleton)
+    return Structure(skeleton, tuple(float(v) for v in parameter_vector(mech)), tuple(names))
 
 
 def parameter_vector(mech: Mechanism) -> np.ndarray:
@@ -74,26 +92,29 @@ class Layout(NamedTuple):
     n_rms: int
 
 
-def _rebuild(skel: Mechanism, p):
-    treedef = jax.tree_util.tree_structure(skel)
-    return jax.tree_util.tree_unflatten(treedef, [p[i] for i in range(treedef.num_leaves)])
+def _mechanism(st: Structure, p):
+    """The mechanism whose run-time inputs are ``p`` (traced)."""
+    treedef = jax.tree_util.tree_structure(st.skeleton)
+    if st.constants is None:
+        return jax.tree_util.tree_unflatten(treedef, [p[i] for i in range(treedef.num_leaves)])
+    base = jax.tree_util.tree_unflatten(treedef, list(st.constants))
+    return set_parameters(base, list(st.names), [p[i] for i in range(len(st.names))])
 
 
 def layout(st: Structure) -> Layout:
     skel = st.skeleton
-    n_params = jax.tree_util.tree_structure(skel).num_leaves
+    n_params = jax.tree_util.tree_structure(skel).num_leaves if st.constants is None else len(st.names)
     return Layout(n_params, model.state_size(skel), len(metrics.PEAK_METRICS), len(metrics.RMS_METRICS))
 
 
 def _functions(st: Structure) -> str:
-    skel = st.skeleton
     lay = layout(st)
 
     def field(p, t, y):
-        return (model.vector_field(t, y, _rebuild(skel, p)),)
+        return (model.vector_field(t, y, _mechanism(st, p)),)
 
     def frame(p, t, y):
-        f = model.evaluate(_rebuild(skel, p), t, y)
+        f = model.evaluate(_mechanism(st, p), t, y)
         return f.state_rate, tracking._peak_values(f), metrics.rms_signals(f)
 
     def interp(t0, t1, y0, k, t):
@@ -165,9 +186,29 @@ KFN int kisfinite(double a) { return a - a == 0.0; }
 """
 
 
+FIELD_BATCH = """
+#ifndef __CUDACC__
+int jk_field_batch(long n, const double *params, const double *t, const double *y, double *rate) {
+  for (long d = 0; d < n; d++) jk_field(params + NP * d, t[d], y + NY * d, rate + NY * d);
+  return 0;
+}
+#endif
+"""
+
+
+def field_source(st: Structure) -> str:
+    """A C source with the generated vector field alone and its batch entry point
+    ``jk_field_batch`` (what the field's tests compile: shorter than the whole kernel)."""
+    lay = layout(st)
+    pin = [("p", (lay.n_params,)), ("t", ()), ("y", (lay.n_state,))]
+    field, _ = codegen.emit_function(
+        "jk_field", lambda p, t, y: (model.vector_field(t, y, _mechanism(st, p)),), pin, ["rate"]
+    )
+    return "\n".join([PRELUDE, f"#define NP {lay.n_params}", f"#define NY {lay.n_state}", field, FIELD_BATCH])
+
+
 @functools.lru_cache(maxsize=16)
 def kernel_source(st: Structure) -> str:
     """The complete C source (prelude, constants, generated functions, ``solver.c``)."""
     loop = resources.files(__package__).joinpath("solver.c").read_text()
-    return "\n".join([PRELUDE, _constants(st), _functions(st), loop])
-
+    return "\n".join([PRELUDE, _constants(st), _functions(st), loop, FIELD_BATCH])
