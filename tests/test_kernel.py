@@ -185,3 +185,76 @@ def test_same_batch_is_deterministic_whatever_the_threads():
 def test_kernel_refuses_other_solvers():
     with pytest.raises(jc.params.ParameterError, match="tsit5"):
         engine.solve(jc.paper(), NAMES, DESIGNS[:1], sweep.Settings(solver="kvaerno5"))
+
+
+SWEEP_NAMES = ["clearance_C", "contact.memory_time"]
+# design 1: too stiff for its step budget; design 3: clearance larger than the hole (invalid)
+SWEEP_DESIGNS = np.array([[2.5e-4, 1e-5], [2.5e-4, 1e-10], [3e-4, 1e-5], [9e-3, 1e-5], [1.5e-4, 2e-5]])
+SWEEP_SHORT = sweep.Settings(
+    revolutions=0.03, samples_per_revolution=1200, metrics_from_revolution=0.01, max_steps=20_000
+)
+
+
+def test_kernel_sweep_writes_the_table_and_resumes(tmp_path, monkeypatch):
+    """``sweep.run(engine="kernel")`` writes the XLA engine's columns and statuses
+    (invalid, max_steps, ok); killed after its first chunk, it resumes to the table of
+    an uninterrupted run, exactly."""
+    from jaxcrank.runs import engines
+
+    whole = sweep.run(jc.paper(), SWEEP_NAMES, SWEEP_DESIGNS, SWEEP_SHORT, chunk=2, progress=False, engine="kernel")
+    assert list(whole["status"]) == ["ok", "max_steps", "ok", "invalid", "ok"]
+    assert set(whole) == set(sweep.columns(SWEEP_NAMES))
+    real, calls = engines.kernel_evaluate, {"n": 0}
+
+    def dies_after_first_chunk(*a):
+        if calls["n"] == 1:
+            raise KeyboardInterrupt("killed")
+        calls["n"] += 1
+        return real(*a)
+
+    monkeypatch.setattr(engines, "kernel_evaluate", dies_after_first_chunk)
+    run = lambda **kw: sweep.run(  # noqa: E731
+        jc.paper(),
+        SWEEP_NAMES,
+        SWEEP_DESIGNS,
+        SWEEP_SHORT,
+        out=tmp_path,
+        chunk=2,
+        progress=False,
+        engine="kernel",
+        **kw,
+    )
+    with pytest.raises(KeyboardInterrupt):
+        run()
+    assert sorted(sweep.read_table(tmp_path / "table.csv")["index"]) == [0, 1, 3]
+    monkeypatch.setattr(engines, "kernel_evaluate", real)
+    resumed = run(resume=True)
+    for key in whole:
+        if key in ("status", "message"):
+            assert list(resumed[key]) == list(whole[key])
+        else:
+            np.testing.assert_array_equal(resumed[key], whole[key], err_msg=key)
+
+
+def test_kernel_sweep_refuses_what_it_cannot_run():
+    with pytest.raises(jc.params.ParameterError, match="engine"):
+        sweep.run(jc.paper(), SWEEP_NAMES, SWEEP_DESIGNS[:1], SWEEP_SHORT, progress=False, engine="warp")
+    with pytest.raises(jc.params.ParameterError, match="workers"):
+        sweep.run(jc.paper(), SWEEP_NAMES, SWEEP_DESIGNS[:1], SWEEP_SHORT, progress=False, engine="kernel", workers=2)
+
+
+def test_cli_sweep_engine_flag(tmp_path):
+    """``jaxcrank sweep --engine kernel`` writes the table and records its engine."""
+    import json
+
+    from jaxcrank import cli
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(
+        'sampling = "grid"\n[parameters.clearance_C]\nvalues = [2.5e-4, 3e-4]\n'
+        "[simulation]\nrevolutions = 0.02\nsamples_per_revolution = 1200\nmetrics_from_revolution = 0.01\n"
+    )
+    out = tmp_path / "run"
+    assert cli.main(["sweep", "--spec", str(spec), "--out", str(out), "--quiet", "--engine", "kernel"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["engine"] == "kernel" and summary["status_counts"]["ok"] == 2

@@ -63,6 +63,14 @@ def _simulate_parser(sub):
         "--max-steps", type=int, default=DEFAULTS.max_steps, help=f"solver step budget (default {DEFAULTS.max_steps})"
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument(
+        "--engine",
+        choices=("kernel", "xla"),
+        default=None,
+        help="kernel: each design's solve in one compiled C function, one design per CPU thread (tsit5; "
+        "the default where a C compiler is available, for tsit5 without --workers or --distributed); "
+        "xla: the compiled JAX solve (every solver)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -192,7 +200,9 @@ TOML spec (SI units; every key but [parameters] optional):
                        # solver = "tsit5", rtol = 1e-6, atol = 1e-6, max_steps = 500000
   [mechanism]          # the base mechanism, as in `jaxcrank simulate`'s config.toml
 
-Several CPU cores: --workers N (N local processes). Several devices: every local
+Engines: --engine kernel (default where a C compiler is available: one design per CPU
+thread, tsit5 only, chunk default 16 per thread) or --engine xla (every solver; several
+CPU cores: --workers N local processes). Several devices: every local
 device is used (a GPU machine's GPUs). Several machines: see docs/sweeps.md, "On a cluster".
 """
 
@@ -224,6 +234,14 @@ def _sweep_parser(sub):
         default=1,
         help="local processes solving designs in parallel, e.g. one per CPU core (default 1)",
     )
+    p.add_argument(
+        "--engine",
+        choices=("kernel", "xla"),
+        default=None,
+        help="kernel: each design's solve in one compiled C function, one design per CPU thread (tsit5; "
+        "the default where a C compiler is available, for tsit5 without --workers or --distributed); "
+        "xla: the compiled JAX solve (every solver)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -233,7 +251,7 @@ def run_sweep(args) -> int:
 
     from ..analysis import metrics
 
-    from . import plots, sweep
+    from . import engines, plots, sweep
     from . import spec as spec_module
 
     if args.distributed or args.coordinator:
@@ -246,8 +264,11 @@ def run_sweep(args) -> int:
         out.mkdir(parents=True, exist_ok=True)
         (out / "spec.toml").write_text(args.spec.read_text())
     start = time.perf_counter()
+    distributed = bool(args.distributed or args.coordinator)
+    engine = args.engine or engines.default_engine(spec.settings, args.workers, distributed)
     # the chunk this sweep uses (on a GPU derived from its free memory), reported below
-    chunk = sweep.resolve_chunk(spec.base, spec.names, spec.settings, spec.chunk)
+    chunk = spec.chunk if spec.chunk is not None or engine == "xla" else engines.default_chunk()
+    chunk = sweep.resolve_chunk(spec.base, spec.names, spec.settings, chunk)
     table = sweep.run(
         spec.base,
         spec.names,
@@ -258,6 +279,7 @@ def run_sweep(args) -> int:
         chunk=chunk,
         workers=args.workers,
         progress=not args.quiet,
+        engine=engine,
     )
     wall = time.perf_counter() - start
     if jax.process_index() != 0:
@@ -272,6 +294,7 @@ def run_sweep(args) -> int:
             "processes": jax.process_count(),
             "workers": args.workers,
             "chunk": chunk,
+            "engine": engine,
             "settings": dataclasses.asdict(spec.settings),
             "versions": _versions(),
             "metric_meanings": metrics.meanings(),
