@@ -5,6 +5,8 @@ touching their batch mates, and a batch is deterministic."""
 
 import dataclasses
 import itertools
+import shutil
+import subprocess
 
 import equinox as eqx
 import jax
@@ -14,7 +16,7 @@ import pytest
 import jaxcrank as jc
 from jaxcrank import metrics, sweep
 from jaxcrank.numerics import solve as solve_module
-from jaxcrank.numerics.kernel import build, codegen, engine, source
+from jaxcrank.numerics.kernel import build, codegen, engine, gpu, source
 from jaxcrank.physics import laws, model
 from jaxcrank.physics.params import Joint
 
@@ -258,3 +260,15 @@ def test_cli_sweep_engine_flag(tmp_path):
     assert cli.main(["sweep", "--spec", str(spec), "--out", str(out), "--quiet", "--engine", "kernel"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["engine"] == "kernel" and summary["status_counts"]["ok"] == 2
+
+
+@pytest.mark.skipif(shutil.which("nvcc") is None, reason="no CUDA compiler")
+def test_kernel_source_compiles_as_cuda(tmp_path):
+    """The GPU path's source (the same text under ``__CUDACC__``) compiles to PTX."""
+    cu = tmp_path / "kernel.cu"
+    cu.write_text(source.kernel_source(source.structure(jc.paper(), NAMES)))
+    ptx = tmp_path / "kernel.ptx"
+    cmd = ["nvcc", "-ptx", "-arch=sm_90", *gpu.OPTIONS, "-diag-suppress", "177", str(cu), "-o", str(ptx)]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "jk_solve_gpu" in ptx.read_text()

@@ -17,7 +17,7 @@ KFN int jk_solve_one(const double *KRESTRICT p, double T1, double t_start, long 
                      double rtol, double atol, double dt0, double *KRESTRICT y, double *KRESTRICT peaks,
                      double *KRESTRICT whole, double *KRESTRICT sums, long *KRESTRICT count,
                      long *KRESTRICT accepted, long *KRESTRICT rejected) {
-  double f0[NY], f7[NY], k[7 * NY], ys[NY], yerr[NY], rate[NY], pk[NPEAK], rs[NRMS], yi[NY];
+  double f0[NY], f7[NY], k[7 * NY], ys[NY], rate[NY], pk[NPEAK], rs[NRMS], yi[NY];
   const double T0 = 0.0;
   double floor_ = T1;
   for (int i = 0; i < 100; i++) floor_ = nextafter(floor_, -KINF);
@@ -52,7 +52,6 @@ KFN int jk_solve_one(const double *KRESTRICT p, double T1, double t_start, long 
       double e = 0.0;
       for (int j = 0; j < 7; j++) e += TAB_B_ERR[j] * k[NY * j + i];
       if (e != e) e = KINF;
-      yerr[i] = e;
       const double y1c = nan1 ? y[i] : ys[i];
       const double mag = kmax(fabs(y[i]), fabs(y1c));
       const double sc = e / (atol + mag * rtol);

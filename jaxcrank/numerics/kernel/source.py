@@ -168,8 +168,8 @@ def _constants(st: Structure) -> str:
 PRELUDE = """\
 /* jaxcrank kernel: generated; do not edit */
 #ifdef __CUDACC__
-#define KFN static __device__ __forceinline__
-#define KCONST __device__ const
+#define KFN static __device__
+#define KCONST __constant__ const
 #define KRESTRICT __restrict__
 #else
 #include <math.h>
