@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-fno-math-errno", "-fopenmp", "-shared", "-fPIC", "-std=c99")
+FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-fno-math-errno", "-fopenmp", "-shared", "-fPIC", "-std=gnu11")
 
 
 class KernelBuildError(RuntimeError):
@@ -84,9 +84,11 @@ class Compiled:
         ip = np.ctypeslib.ndpointer(dtype=np.int32, flags="C_CONTIGUOUS")
         cl, ci, cd = ctypes.c_long, ctypes.c_int, ctypes.c_double
         self.lib.jk_field_batch.argtypes = [cl, dp, dp, dp, dp]
+        self.lib.jk_field_batch_v.argtypes = [cl, dp, dp, dp, dp]
         self.layout = None
         if hasattr(self.lib, "jk_solve"):  # a whole kernel (field_source builds the field alone)
             self.lib.jk_solve.argtypes = [cl, ci, dp, dp, dp, cl, cl, cd, cd, cd, dp, dp, dp, dp, lp, lp, lp, ip]
+            self.lib.jk_solve_v.argtypes = self.lib.jk_solve.argtypes
             self.lib.jk_frame_batch.argtypes = [cl, dp, dp, dp, dp, dp, dp]
             self.lib.jk_layout.argtypes = [lp]
             out = np.zeros(4, dtype=np.int64)

@@ -19,8 +19,8 @@ The generated text is valid C99 and CUDA C++ (functions are declared with the
 
 from __future__ import annotations
 
-import itertools
 import math
+import re
 from collections.abc import Callable, Sequence
 
 import jax
@@ -59,9 +59,9 @@ _CALLS = {"jit", "pjit", "closed_call", "core_call", "remat", "checkpoint", "cus
 
 
 def literal(value) -> str:
-    """A C literal of a float, int or bool (infinities and NaN as the prelude's macros)."""
+    """A C literal of a float, int or bool (infinities, NaN and booleans as the prelude's macros)."""
     if isinstance(value, (bool, np.bool_)):
-        return "1" if value else "0"
+        return "KTRUE" if value else "KFALSE"
     if isinstance(value, (int, np.integer)):
         return f"{int(value)}L"
     v = float(value)
@@ -79,8 +79,8 @@ def _value(expr):
         return None
     if expr.endswith("L") and expr[:-1].lstrip("-").isdigit():
         return int(expr[:-1])
-    if expr in ("0", "1"):
-        return expr == "1"
+    if expr in ("KTRUE", "KFALSE"):
+        return expr == "KTRUE"
     try:
         return float(expr)
     except ValueError:
@@ -101,14 +101,15 @@ _FOLD = {
 
 
 def _ctype(dtype) -> str:
+    """The generated code's type macro: ``KD`` (float64), ``KB`` (bool), ``KL`` (integers)."""
     dtype = np.dtype(dtype)
     if dtype == np.bool_:
-        return "int"
+        return "KB"
     if np.issubdtype(dtype, np.integer):
-        return "long"
+        return "KL"
     if dtype != np.float64:
         raise UnsupportedPrimitive(f"dtype {dtype}: the kernel computes in float64 only")
-    return "double"
+    return "KD"
 
 
 class _Writer:
@@ -117,11 +118,21 @@ class _Writer:
     def __init__(self):
         self.lines: list[str] = []
         self.count = 0
+        self.seen: dict[tuple[str, str], str] = {}
 
     def new(self, expr: str, dtype) -> str:
+        """The name of ``expr``'s value: a new local, or the one an identical expression
+        already has (every expression is pure, so this common-subexpression elimination
+        is exact)."""
+        key = (expr, _ctype(dtype))
+        if key in self.seen:
+            return self.seen[key]
         name = f"v{self.count}"
+        self.seen[key] = name
         self.count += 1
-        self.lines.append(f"  const {_ctype(dtype)} {name} = {expr};")
+        ctype = _ctype(dtype)
+        wrap = "KV" if ctype == "KD" else "KVL"  # a statement of literals alone is a scalar: broadcast it
+        self.lines.append(f"  const {ctype} {name} = {wrap}({expr});")
         return name
 
 
@@ -164,40 +175,6 @@ def _sum(w: _Writer, terms: Sequence[str], dtype) -> str:
     return acc
 
 
-def _dot_general(w: _Writer, lhs: np.ndarray, rhs: np.ndarray, params, dtype) -> np.ndarray:
-    (lc, rc), (lb, rb) = params["dimension_numbers"]
-    lf = [d for d in range(lhs.ndim) if d not in lc and d not in lb]
-    rf = [d for d in range(rhs.ndim) if d not in rc and d not in rb]
-    lt = np.transpose(lhs, list(lb) + lf + list(lc))
-    rt = np.transpose(rhs, list(rb) + rf + list(rc))
-    nb, k = len(lb), int(np.prod([lhs.shape[d] for d in lc], dtype=int))
-    batch = lt.shape[:nb]
-    lt = lt.reshape(batch + tuple(lhs.shape[d] for d in lf) + (k,))
-    rt = rt.reshape(batch + tuple(rhs.shape[d] for d in rf) + (k,))
-    lfree, rfree = lt.shape[nb:-1], rt.shape[nb:-1]
-    out = np.empty(batch + lfree + rfree, dtype=object)
-    for b in np.ndindex(batch):
-        for i in np.ndindex(lfree):
-            for j in np.ndindex(rfree):
-                prods = [w.new(f"{lt[b + i + (m,)]} * {rt[b + j + (m,)]}", dtype) for m in range(k)]
-                out[b + i + j] = _sum(w, prods, dtype)
-    return out
-
-
-def _reduce(w: _Writer, x: np.ndarray, axes, combine: Callable[[str, str], str], dtype) -> np.ndarray:
-    keep = [d for d in range(x.ndim) if d not in axes]
-    moved = np.transpose(x, keep + list(axes))
-    shape = moved.shape[: len(keep)]
-    flat = moved.reshape(shape + (-1,))
-    out = np.empty(shape, dtype=object)
-    for idx in np.ndindex(shape):
-        acc = flat[idx + (0,)]
-        for m in range(1, flat.shape[-1]):
-            acc = w.new(combine(acc, flat[idx + (m,)]), dtype)
-        out[idx] = acc
-    return out
-
-
 def _folded(w: _Writer, op: str, dtype, a, b) -> np.ndarray:
     """An integer or comparison op, computed here when both operands are literals
     (loop counters of unrolled scans), else emitted."""
@@ -211,101 +188,6 @@ def _folded(w: _Writer, op: str, dtype, a, b) -> np.ndarray:
             out[idx] = literal(bool(v)) if isinstance(v, bool) else literal(v)
         else:
             out[idx] = w.new(f"{x} {op} {y}", dtype)
-    return out
-
-
-def _scan(w: _Writer, eqn, ins) -> list[np.ndarray]:
-    """A scan of static length, unrolled."""
-    p = eqn.params
-    if p["reverse"]:
-        raise UnsupportedPrimitive("scan with reverse=True")
-    body, consts = p["jaxpr"].jaxpr, p["jaxpr"].consts
-    nc, nk = p["num_consts"], p["num_carry"]
-    fixed, carry, xs = ins[:nc], list(ins[nc : nc + nk]), ins[nc + nk :]
-    ys = []
-    for i in range(p["length"]):
-        out = _run(w, body, consts, list(fixed) + carry + [x[i] for x in xs])
-        carry, y = out[:nk], out[nk:]
-        ys.append(y)
-    stacked = [np.stack([y[j] for y in ys]) for j in range(len(eqn.outvars) - nk)]
-    return carry + stacked
-
-
-def _argmax(w: _Writer, x: np.ndarray, axes, index_dtype) -> np.ndarray:
-    (axis,) = axes
-    moved = np.moveaxis(x, axis, -1)
-    out = np.empty(moved.shape[:-1], dtype=object)
-    for idx in np.ndindex(out.shape):
-        best, where = moved[idx + (0,)], literal(np.asarray(0, dtype=index_dtype).item())
-        for m in range(1, moved.shape[-1]):
-            v = moved[idx + (m,)]
-            better = w.new(f"{v} > {best} || ({v} != {v} && {best} == {best})", np.bool_)
-            best = w.new(f"{better} ? {v} : {best}", np.float64)
-            where = w.new(f"{better} ? {m}L : {where}", index_dtype)
-        out[idx] = where
-    return out
-
-
-def _starts(w: _Writer, operand: np.ndarray, indices, sizes) -> list:
-    """Start indices clamped into range as XLA does: Python ints when known, else C expressions."""
-    out = []
-    for d, idx in enumerate(indices):
-        hi = operand.shape[d] - sizes[d]
-        i = _array(idx).item()
-        v = _value(i)
-        if v is not None:
-            out.append(min(max(int(v), 0), hi))
-        else:
-            out.append(w.new(f"({i} < 0L ? 0L : ({i} > {hi}L ? {hi}L : {i}))", np.int64))
-    return out
-
-
-def _dynamic_slice(w: _Writer, operand: np.ndarray, indices, sizes, dtype) -> np.ndarray:
-    starts = _starts(w, operand, indices, sizes)
-    out = np.empty(sizes, dtype=object)
-    for idx in np.ndindex(*sizes):
-        options = [[]]
-        for d, s in enumerate(starts):
-            if isinstance(s, int):
-                options = [o + [(s + idx[d], None)] for o in options]
-            else:
-                options = [o + [(k + idx[d], (s, k))] for o in options for k in range(operand.shape[d] - sizes[d] + 1)]
-        expr = None
-        for opt in reversed(options):
-            value = operand[tuple(i for i, _ in opt)]
-            conds = [f"{s} == {k}L" for _, c in opt if c is not None for s, k in [c]]
-            expr = value if expr is None else w.new(f"({' && '.join(conds)}) ? {value} : {expr}", dtype)
-        out[idx] = expr
-    return out
-
-
-def _dynamic_update_slice(w: _Writer, operand: np.ndarray, update: np.ndarray, indices, dtype) -> np.ndarray:
-    starts = _starts(w, operand, indices, update.shape)
-    out = operand.copy()
-    for idx in np.ndindex(operand.shape):
-        conds, inside, src = [], True, []
-        for d, s in enumerate(starts):
-            if isinstance(s, int):
-                k = idx[d] - s
-                inside &= 0 <= k < update.shape[d]
-                src.append([(k, None)])
-            else:
-                src.append(
-                    [
-                        (idx[d] - k, k)
-                        for k in range(operand.shape[d] - update.shape[d] + 1)
-                        if 0 <= idx[d] - k < update.shape[d]
-                    ]
-                )
-                conds.append(s)
-        if not inside or any(not opts for opts in src):
-            continue
-        expr = operand[idx]
-        for combo in itertools.product(*src):
-            value = update[tuple(k for k, _ in combo)]
-            terms = [f"{starts[d]} == {c}L" for d, (_, c) in enumerate(combo) if c is not None]
-            expr = value if not terms else w.new(f"({' && '.join(terms)}) ? {value} : {expr}", dtype)
-        out[idx] = expr
     return out
 
 
@@ -363,31 +245,32 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
             return [_folded(w, op, dtype, *ins)]
         return [_elementwise(w, lambda a, b: f"{a} {op} {b}", dtype, *ins)]
     if name in ("max", "min"):
-        return [_elementwise(w, lambda a, b: f"k{name}({a}, {b})", dtype, *ins)]
+        return [_elementwise(w, lambda a, b: f"K{name.upper()}({a}, {b})", dtype, *ins)]
     if name in _UNARY:
         fn = _UNARY[name]
-        return [_elementwise(w, lambda a: f"{fn}({a})", dtype, *ins)]
+        return [_elementwise(w, lambda a: f"KF1({fn}, {a})", dtype, *ins)]
     simple = {
         "neg": lambda a: f"-{a}",
         # XLA's decomposition of asin (chlo.asin), not libm's: the same rounding
-        "asin": lambda a: f"2.0 * atan2({a}, 1.0 + sqrt((1.0 - {a}) * (1.0 + {a})))",
+        "asin": lambda a: f"2.0 * KF2(atan2, {a}, 1.0 + KF1(sqrt, (1.0 - {a}) * (1.0 + {a})))",
         "square": lambda a: f"{a} * {a}",
-        "rsqrt": lambda a: f"1.0 / sqrt({a})",
-        "sign": lambda a: f"ksign({a})",
-        "not": lambda a: f"!{a}",
-        "is_finite": lambda a: f"kisfinite({a})",
-        "logistic": lambda a: f"1.0 / (1.0 + exp(-{a}))",
+        "rsqrt": lambda a: f"1.0 / KF1(sqrt, {a})",
+        "sign": lambda a: f"KSIGN({a})",
+        "not": lambda a: f"KNOT({a})",
+        "is_finite": lambda a: f"KISFINITE({a})",
+        "logistic": lambda a: f"1.0 / (1.0 + KF1(exp, -{a}))",
     }
     if name in simple:
         return [_elementwise(w, simple[name], dtype, *ins)]
     if name in ("and", "or"):
-        op = "&&" if name == "and" else "||"
-        if dtype != np.bool_:
-            op = op[0]
+        if dtype == np.bool_:
+            macro = "KAND" if name == "and" else "KOR"
+            return [_elementwise(w, lambda a, b: f"{macro}({a}, {b})", dtype, *ins)]
+        op = "&" if name == "and" else "|"
         return [_elementwise(w, lambda a, b: f"{a} {op} {b}", dtype, *ins)]
     if name in ("pow", "atan2", "nextafter", "rem"):
         fn = {"pow": "pow", "atan2": "atan2", "nextafter": "nextafter", "rem": "fmod"}[name]
-        return [_elementwise(w, lambda a, b: f"{fn}({a}, {b})", dtype, *ins)]
+        return [_elementwise(w, lambda a, b: f"KF2({fn}, {a}, {b})", dtype, *ins)]
     if name == "integer_pow":
         x = ins[0]
         out = np.empty(x.shape, dtype=object)
@@ -403,24 +286,26 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
         for idx in np.ndindex(out.shape):
             c, a, b = (x[idx] for x in arrays)
             known = _value(c)
-            out[idx] = (b if known else a) if known is not None else w.new(f"{c} ? {b} : {a}", dtype)
+            select = "KSEL" if np.dtype(dtype) == np.float64 else "KSELL"
+            out[idx] = (b if known else a) if known is not None else w.new(f"{select}({c}, {b}, {a})", dtype)
         return [out]
     if name == "scan":
-        return _scan(w, eqn, ins)
+        return indexing.scan(w, eqn, ins)
     if name == "argmax":
-        return [_argmax(w, ins[0], tuple(p["axes"]), p["index_dtype"])]
+        return [indexing.argmax(w, ins[0], tuple(p["axes"]), p["index_dtype"])]
     if name == "dynamic_slice":
-        return [_dynamic_slice(w, ins[0], ins[1:], tuple(p["slice_sizes"]), dtype)]
+        return [indexing.dynamic_slice(w, ins[0], ins[1:], tuple(p["slice_sizes"]), dtype)]
     if name == "dynamic_update_slice":
-        return [_dynamic_update_slice(w, ins[0], ins[1], ins[2:], dtype)]
+        return [indexing.dynamic_update_slice(w, ins[0], ins[1], ins[2:], dtype)]
     if name == "clamp":
-        return [_elementwise(w, lambda lo, x, hi: f"kmin(kmax({x}, {lo}), {hi})", dtype, *ins)]
+        return [_elementwise(w, lambda lo, x, hi: f"KMIN(KMAX({x}, {lo}), {hi})", dtype, *ins)]
     if name == "convert_element_type":
         ctype = _ctype(p["new_dtype"])
         src = _ctype(eqn.invars[0].aval.dtype)
         if ctype == src:
             return ins
-        fmt = (lambda a: f"{a} != 0") if ctype == "int" else (lambda a: f"({ctype}){a}")
+        macro = {"KB": "B", "KL": "L", "KD": "D"}
+        fmt = lambda a: f"K{macro[src]}2{macro[ctype]}({a})"  # noqa: E731
         return [_elementwise(w, fmt, p["new_dtype"], *ins)]
     if name == "slice":
         strides = p["strides"] or (1,) * ins[0].ndim
@@ -452,13 +337,34 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
         idx = np.indices(shape)[dim]
         return [np.vectorize(lambda v: literal(np.asarray(v, dtype=p["dtype"]).item()), otypes=[object])(idx)]
     if name == "dot_general":
-        return [_dot_general(w, ins[0], ins[1], p, dtype)]
+        return [indexing.dot_general(w, ins[0], ins[1], p, dtype)]
     if name == "reduce_sum":
-        return [_reduce(w, ins[0], tuple(p["axes"]), lambda a, b: f"{a} + {b}", dtype)]
+        return [indexing.reduce(w, ins[0], tuple(p["axes"]), lambda a, b: f"{a} + {b}", dtype)]
     if name in ("reduce_max", "reduce_min"):
-        fn = "kmax" if name == "reduce_max" else "kmin"
-        return [_reduce(w, ins[0], tuple(p["axes"]), lambda a, b: f"{fn}({a}, {b})", dtype)]
+        fn = "KMAX" if name == "reduce_max" else "KMIN"
+        return [indexing.reduce(w, ins[0], tuple(p["axes"]), lambda a, b: f"{fn}({a}, {b})", dtype)]
     raise UnsupportedPrimitive(f"primitive {name!r} has no scalar C translation in jaxcrank.numerics.kernel.codegen")
+
+
+_TRIG = re.compile(r"^  const KD (v\d+) = KV\(KF1\((sin|cos), (v\d+)\)\);$")
+
+
+def _fuse_sincos(lines: list[str]) -> list[str]:
+    """Sine and cosine of one argument as one ``KSINCOS`` (libm's sincos gives both, with
+    the values of sin and cos), where both are taken."""
+    trig = {}
+    for i, line in enumerate(lines):
+        m = _TRIG.match(line)
+        if m:
+            trig.setdefault(m.group(3), {})[m.group(2)] = (i, m.group(1))
+    out = list(lines)
+    for arg, both in trig.items():
+        if len(both) == 2:
+            (i, s_name), (j, c_name) = both["sin"], both["cos"]
+            first, second = min(i, j), max(i, j)
+            out[first] = f"  KD {s_name}, {c_name};\n  KSINCOS({arg}, {s_name}, {c_name});"
+            out[second] = None
+    return [line for line in out if line is not None]
 
 
 def emit_function(
@@ -493,14 +399,17 @@ def emit_function(
     results = _run(w, closed.jaxpr, closed.consts, args)
     if len(results) != len(outputs):
         raise ValueError(f"{name}: the function returns {len(results)} arrays for {len(outputs)} output names")
-    body = list(w.lines)
+    body = _fuse_sincos(w.lines)
     shapes = []
     for out_name, res in zip(outputs, results):
         res = _array(res)
         shapes.append(res.shape)
         for i, expr in enumerate(res.reshape(-1)):
-            body.append(f"  {out_name}[{i}] = {expr};")
-    params = [f"double {n}" if s == () else f"const double *KRESTRICT {n}" for n, s in inputs]
-    params += [f"double *KRESTRICT {n}" for n in outputs]
-    head = f"KFN void {name}({', '.join(params)})"
+            body.append(f"  {out_name}[{i}] = KV({expr});")
+    params = [f"KD {n}" if s == () else f"const KD *KRESTRICT {n}" for n, s in inputs]
+    params += [f"KD *KRESTRICT {n}" for n in outputs]
+    head = f"KFN void KNAME({name})({', '.join(params)})"
     return head + " {\n" + "\n".join(body) + "\n}\n", shapes
+
+
+from . import indexing  # noqa: E402  (indexing uses this module's helpers)

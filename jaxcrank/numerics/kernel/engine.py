@@ -85,6 +85,7 @@ def solve_mechanisms(
     max_steps: int = 500_000,
     y0: np.ndarray | None = None,
     threads: int | None = None,
+    vector: bool = True,
 ) -> Batch:
     """Solve each mechanism from 0 to its ``t_end`` (s) with tsit5, tracking the
     headline metrics over ``t > t_start`` (s) with ``n_samples`` equally spaced RMS
@@ -98,6 +99,9 @@ def solve_mechanisms(
         rtol, atol, dt0, max_steps: as :class:`jaxcrank.numerics.solve.SolveOptions`.
         y0: (n, state) scaled initial states (default pins centred, zeros).
         threads: OpenMP threads (default :func:`default_threads`).
+        vector: solve four designs per thread, one per vector lane (the default; the
+            numbers equal the one-design-per-thread loop's bit for bit, which
+            ``vector=False`` runs).
 
     Raises:
         ParameterError: for mechanisms of different structures, ``n_samples < 2`` or bad settings.
@@ -109,10 +113,10 @@ def solve_mechanisms(
     for m in mechs[1:]:
         if source.structure(m) != st:
             raise ParameterError("all designs of a kernel batch must share laws and ideal joints (one structure)")
-    return _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, threads)
+    return _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, threads, vector)
 
 
-def _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, threads) -> Batch:
+def _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, threads, vector=True) -> Batch:
     """Solve the designs whose run-time inputs (``st``'s layout) are the rows of ``params``."""
     if int(n_samples) < 2:
         raise ParameterError(f"n_samples = {n_samples} must be >= 2")
@@ -132,7 +136,7 @@ def _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, 
     count, accepted, rejected = (np.zeros(n, dtype=np.int64) for _ in range(3))
     result = np.zeros(n, dtype=np.int32)
     threads = default_threads() if threads is None else int(threads)
-    lib.lib.jk_solve(
+    (lib.lib.jk_solve_v if vector else lib.lib.jk_solve)(
         n, threads, params, t_end, t_start, int(n_samples), int(max_steps), float(rtol), float(atol), float(dt0),
         y, peaks, whole, sums, count, accepted, rejected, result,
     )  # fmt: skip
@@ -142,7 +146,9 @@ def _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, 
     return Batch(values, status.astype(np.int64), accepted, rejected, y, whole)
 
 
-def solve(base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, threads: int | None = None) -> Batch:
+def solve(
+    base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, threads: int | None = None, vector: bool = True
+) -> Batch:
     """Designs ``xs`` (n, len(names)) of ``base`` (SI values of ``names``), simulated as
     a sweep's :class:`jaxcrank.runs.sweep.Settings` asks (revolutions, samples,
     metrics window, tolerances, step budget).
@@ -157,4 +163,5 @@ def solve(base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, threa
     o = settings.options
     st = source.structure(base, names)  # the parameters that do not vary are compile-time constants
     t_end, t_start = settings.revolutions * periods, settings.metrics_from_revolution * periods
-    return _run(st, xs, t_end, t_start, settings.n_samples, o.rtol, o.atol, o.dt0, o.max_steps, None, threads)
+    args = (settings.n_samples, o.rtol, o.atol, o.dt0, o.max_steps, None, threads, vector)
+    return _run(st, xs, t_end, t_start, *args)

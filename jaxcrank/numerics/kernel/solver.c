@@ -143,3 +143,159 @@ extern "C" __global__ void jk_solve_gpu(long n, const double *params, const doub
                            accepted + d, rejected + d);
 }
 #endif
+
+#ifndef __CUDACC__
+/* The same loop on W designs at once, one per vector lane (jk_field_v, jk_frame_v: the
+ * generated functions on GCC vectors). Each lane keeps its own times, steps and
+ * accumulators; a lane that has finished idles (its updates are masked) until the
+ * group's last lane finishes. A lane's arithmetic is the scalar loop's, operation for
+ * operation, so its numbers equal jk_solve_one's bit for bit. */
+static void jk_solve_group(int lanes, const double *params, const double *t_end, const double *t_start,
+                           long n_samples, long max_steps, double rtol, double atol, double dt0, double *y_out,
+                           double *peaks_out, double *whole_out, double *sums_out, long *count_out,
+                           long *accepted_out, long *rejected_out, int *result_out) {
+  vd p[NP > 0 ? NP : 1], y[NY], f0[NY], f7[NY], k[7][NY], ys[NY], rate[NY], pk[NPEAK], rs[NRMS];
+  vd peaks[NPEAK], whole[NPEAK];
+  double sums[W][NRMS];
+  long cnt[W], next_sample[W], steps[W], acc[W], rej[W];
+  vd T1, tstart, floor_, tprev, tnext;
+  for (int l = 0; l < W; l++) {
+    const int d = l < lanes ? l : 0; /* unused lanes repeat lane 0 and are dropped */
+    for (int i = 0; i < NP; i++) p[i][l] = params[NP * d + i];
+    for (int i = 0; i < NY; i++) y[i][l] = y_out[NY * d + i];
+    T1[l] = l < lanes ? t_end[d] : 0.0; /* an unused lane is finished from the start */
+    tstart[l] = t_start[d];
+    double fl = T1[l];
+    for (int i = 0; i < 100; i++) fl = nextafter(fl, -KINF);
+    floor_[l] = fl;
+    cnt[l] = next_sample[l] = steps[l] = acc[l] = rej[l] = 0;
+    for (int j = 0; j < NRMS; j++) sums[l][j] = 0.0;
+  }
+  for (int j = 0; j < NPEAK; j++) peaks[j] = whole[j] = KV(PEAK_INIT[j]);
+  const vd zero = KV(0.0);
+  jk_field_v(p, zero, y, f0);
+  tprev = zero;
+  tnext = kv_min(KV(dt0), T1);
+  for (;;) {
+    vl active = tprev < T1;
+    int any = 0;
+    for (int l = 0; l < W; l++) {
+      if (steps[l] >= max_steps) active[l] = 0;
+      any |= active[l] != 0;
+    }
+    if (!any) break;
+    const vd t0 = tprev, t1 = tnext, dt = t1 - t0;
+    for (int i = 0; i < NY; i++) k[0][i] = f0[i] * dt;
+    for (int s = 1; s < 7; s++) {
+      for (int i = 0; i < NY; i++) {
+        vd inc = zero;
+        for (int j = 0; j < s; j++) inc += TAB_A[7 * s + j] * k[j][i];
+        ys[i] = y[i] + inc;
+      }
+      const vd ts = TAB_C[s] == 1.0 ? t1 : t0 + TAB_C[s] * dt;
+      if (s < 6) {
+        jk_field_v(p, ts, ys, rate);
+        for (int i = 0; i < NY; i++) k[s][i] = rate[i] * dt;
+      } else {
+        jk_frame_v(p, ts, ys, f7, pk, rs);
+        for (int i = 0; i < NY; i++) k[s][i] = f7[i] * dt;
+      }
+    }
+    vl nan1 = KVLZ;
+    for (int i = 0; i < NY; i++) nan1 |= ys[i] != ys[i];
+    vd ss = zero;
+    for (int i = 0; i < NY; i++) {
+      vd e = zero;
+      for (int j = 0; j < 7; j++) e += TAB_B_ERR[j] * k[j][i];
+      e = kv_sel(e != e, KV(KINF), e);
+      const vd y1c = kv_sel(nan1, y[i], ys[i]);
+      vd ay = y[i], a1 = y1c;
+      for (int l = 0; l < W; l++) {
+        ay[l] = fabs(ay[l]);
+        a1[l] = fabs(a1[l]);
+      }
+      const vd mag = kv_max(ay, a1);
+      const vd sc = e / (atol + mag * rtol);
+      ss += sc * sc;
+    }
+    vd scaled = ss, powed;
+    for (int l = 0; l < W; l++) scaled[l] = sqrt(ss[l]) / NORM_SQRT_N;
+    const vl keep = (scaled < 1.0) & active;
+    const vd inv = 1.0 / scaled;
+    for (int l = 0; l < W; l++) powed[l] = pow(inv[l], ERROR_EXPONENT);
+    const vd fmin_ = kv_sel(keep, KV(1.0), KV(FACTOR_MIN));
+    const vd fmax_ = kv_sel(keep, KV(FACTOR_MAX), KV(SAFETY));
+    const vd factor = kv_min(kv_max(SAFETY * powed, fmin_), fmax_);
+    const vd next_t0 = kv_sel(keep, t1, t0);
+    const vd next_t1 = next_t0 + dt * factor;
+    const vd tprev_new = kv_min(next_t0, T1);
+    const vd tnext_new = kv_sel(next_t1 > floor_, kv_sel(keep, T1, tprev_new + 0.5 * (T1 - tprev_new)), next_t1);
+    tprev = kv_sel(active, tprev_new, tprev);
+    tnext = kv_sel(active, tnext_new, tnext);
+    const vl in_window = keep & (t1 > tstart);
+    for (int j = 0; j < NPEAK; j++) {
+      peaks[j] = kv_sel(in_window, kv_max(peaks[j], pk[j]), peaks[j]);
+      whole[j] = kv_sel(keep, kv_max(whole[j], pk[j]), whole[j]);
+    }
+    for (int l = 0; l < W; l++) {
+      if (!active[l]) continue;
+      steps[l] += 1;
+      if (!keep[l]) {
+        rej[l] += 1;
+        continue;
+      }
+      acc[l] += 1;
+      double y0l[NY], kl[7 * NY], yi[NY], rl[NY], pkl[NPEAK], rsl[NRMS], pl[NP > 0 ? NP : 1];
+      int loaded = 0;
+      while (next_sample[l] < n_samples && jk_sample_time(next_sample[l], n_samples, T1[l]) <= t1[l]) {
+        if (!loaded) {
+          for (int i = 0; i < NY; i++) y0l[i] = y[i][l];
+          for (int j = 0; j < 7; j++)
+            for (int i = 0; i < NY; i++) kl[NY * j + i] = k[j][i][l];
+          for (int i = 0; i < NP; i++) pl[i] = p[i][l];
+          loaded = 1;
+        }
+        const double tsmp = jk_sample_time(next_sample[l], n_samples, T1[l]);
+        jk_interp(t0[l], t1[l], y0l, kl, tsmp, yi);
+        jk_frame(pl, tsmp, yi, rl, pkl, rsl);
+        if (tsmp > tstart[l]) {
+          for (int j = 0; j < NRMS; j++) sums[l][j] += rsl[j] * rsl[j];
+          cnt[l] += 1;
+        }
+        next_sample[l] += 1;
+      }
+    }
+    for (int i = 0; i < NY; i++) {
+      y[i] = kv_sel(keep, ys[i], y[i]);
+      f0[i] = kv_sel(keep, f7[i], f0[i]);
+    }
+  }
+  for (int l = 0; l < lanes; l++) {
+    for (int i = 0; i < NY; i++) y_out[NY * l + i] = y[i][l];
+    for (int j = 0; j < NPEAK; j++) {
+      peaks_out[NPEAK * l + j] = peaks[j][l];
+      whole_out[NPEAK * l + j] = whole[j][l];
+    }
+    for (int j = 0; j < NRMS; j++) sums_out[NRMS * l + j] = sums[l][j];
+    count_out[l] = cnt[l];
+    accepted_out[l] = acc[l];
+    rejected_out[l] = rej[l];
+    result_out[l] = tprev[l] < T1[l] ? JK_MAX_STEPS : JK_OK;
+  }
+}
+
+int jk_solve_v(long n, int threads, const double *params, const double *t_end, const double *t_start,
+               long n_samples, long max_steps, double rtol, double atol, double dt0, double *y, double *peaks,
+               double *whole, double *sums, long *count, long *accepted, long *rejected, int *result) {
+  long g, groups = (n + W - 1) / W;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (g = 0; g < groups; g++) {
+    const long d = g * W;
+    const int lanes = n - d < W ? (int)(n - d) : W;
+    jk_solve_group(lanes, params + NP * d, t_end + d, t_start + d, n_samples, max_steps, rtol, atol, dt0,
+                   y + NY * d, peaks + NPEAK * d, whole + NPEAK * d, sums + NRMS * d, count + d, accepted + d,
+                   rejected + d, result + d);
+  }
+  return 0;
+}
+#endif

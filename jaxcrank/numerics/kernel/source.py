@@ -128,7 +128,8 @@ def _functions(st: Structure) -> str:
         "jk_interp", interp, [("t0", ()), ("t1", ()), ("y0", (n,)), ("k", (7, n)), ("t", ())], ["out"]
     )
     assert shapes == [(n,), (lay.n_peak,), (lay.n_rms,)], shapes
-    return "\n".join([src_field, src_frame, src_interp])
+    vector = "\n".join(["#ifndef __CUDACC__", VECTOR, src_field, src_frame, "#endif"])
+    return "\n".join([SCALAR, src_field, src_frame, src_interp, vector])
 
 
 def _array(name: str, values) -> str:
@@ -172,6 +173,7 @@ PRELUDE = """\
 #define KCONST __constant__ const
 #define KRESTRICT __restrict__
 #else
+#define _GNU_SOURCE
 #include <math.h>
 #define KFN static inline
 #define KCONST const
@@ -183,6 +185,102 @@ KFN double kmax(double a, double b) { return (a != a || b != b) ? a + b : (a > b
 KFN double kmin(double a, double b) { return (a != a || b != b) ? a + b : (a < b ? a : b); }
 KFN double ksign(double a) { return a > 0.0 ? 1.0 : (a < 0.0 ? -1.0 : a); }
 KFN int kisfinite(double a) { return a - a == 0.0; }
+"""
+
+#: the generated code's vocabulary, for scalar code (C and CUDA)
+SCALAR = """\
+#define KD double
+#define KB int
+#define KL long
+#define KNAME(n) n
+#define KV(x) (x)
+#define KVL(x) (x)
+#define KSEL(c, b, a) ((c) ? (b) : (a))
+#define KSELL(c, b, a) ((c) ? (b) : (a))
+#define KAND(a, b) ((a) && (b))
+#define KOR(a, b) ((a) || (b))
+#define KNOT(a) (!(a))
+#define KTRUE 1
+#define KFALSE 0
+#define KB2D(a) ((double)(a))
+#define KL2D(a) ((double)(a))
+#define KD2B(a) ((a) != 0.0)
+#define KL2B(a) ((a) != 0)
+#define KD2L(a) ((long)(a))
+#define KB2L(a) ((long)(a))
+#define KF1(f, x) f(x)
+#define KF2(f, a, b) f(a, b)
+#define KSINCOS(x, s, c) s = sin(x), c = cos(x)
+#define KMAX(a, b) kmax(a, b)
+#define KMIN(a, b) kmin(a, b)
+#define KSIGN(a) ksign(a)
+#define KISFINITE(a) kisfinite(a)
+"""
+
+#: the same vocabulary on GCC vectors of W lanes, one design per lane (CPU only): the
+#: same IEEE operations lane by lane, libm called per lane, so a lane's numbers equal
+#: the scalar code's bit for bit
+VECTOR = """\
+#undef KD
+#undef KB
+#undef KL
+#undef KNAME
+#undef KV
+#undef KVL
+#undef KSEL
+#undef KSELL
+#undef KAND
+#undef KOR
+#undef KNOT
+#undef KTRUE
+#undef KFALSE
+#undef KB2D
+#undef KL2D
+#undef KD2B
+#undef KL2B
+#undef KD2L
+#undef KB2L
+#undef KF1
+#undef KF2
+#undef KSINCOS
+#undef KMAX
+#undef KMIN
+#undef KSIGN
+#undef KISFINITE
+#define W 4
+typedef double vd __attribute__((vector_size(8 * W)));
+typedef long vl __attribute__((vector_size(8 * W)));
+static const vd KVZ = {-0.0, -0.0, -0.0, -0.0};
+#define KD vd
+#define KB vl
+#define KL vl
+#define KNAME(n) n##_v
+#define KV(x) (KVZ + (x))
+#define KVL(x) (KVLZ + (x))
+static const vl KVLZ = {0, 0, 0, 0};
+static inline vd kv_sel(vl c, vd b, vd a) { return (vd)(((vl)b & c) | ((vl)a & ~c)); }
+static inline vd kv_max(vd a, vd b) { return kv_sel((a != a) | (b != b), a + b, kv_sel(a > b, a, b)); }
+static inline vd kv_min(vd a, vd b) { return kv_sel((a != a) | (b != b), a + b, kv_sel(a < b, a, b)); }
+#define KSEL(c, b, a) kv_sel((c), KV(b), KV(a))
+#define KSELL(c, b, a) (((c) & (b)) | (~(c) & (a)))
+#define KAND(a, b) ((a) & (b))
+#define KOR(a, b) ((a) | (b))
+#define KNOT(a) (~(a))
+#define KTRUE (-1L)
+#define KFALSE 0L
+#define KB2D(a) (-__builtin_convertvector(KVL(a), vd))
+#define KL2D(a) __builtin_convertvector(KVL(a), vd)
+#define KD2B(a) ((a) != 0.0)
+#define KL2B(a) ((a) != 0)
+#define KD2L(a) __builtin_convertvector(KV(a), vl)
+#define KB2L(a) (-(a))
+#define KF1(f, x) ({ vd _x = KV(x), _r; for (int _l = 0; _l < W; _l++) _r[_l] = f(_x[_l]); _r; })
+#define KF2(f, a, b) ({ vd _a = KV(a), _b = KV(b), _r; for (int _l = 0; _l < W; _l++) _r[_l] = f(_a[_l], _b[_l]); _r; })
+#define KSINCOS(x, s, c) for (int _l = 0; _l < W; _l++) sincos((x)[_l], &(s)[_l], &(c)[_l])
+#define KMAX(a, b) kv_max(KV(a), KV(b))
+#define KMIN(a, b) kv_min(KV(a), KV(b))
+#define KSIGN(a) kv_sel((a) > 0.0, KV(1.0), kv_sel((a) < 0.0, KV(-1.0), KV(a)))
+#define KISFINITE(a) (((a) - (a)) == 0.0)
 """
 
 
@@ -204,11 +302,35 @@ def field_source(st: Structure) -> str:
     field, _ = codegen.emit_function(
         "jk_field", lambda p, t, y: (model.vector_field(t, y, _mechanism(st, p)),), pin, ["rate"]
     )
-    return "\n".join([PRELUDE, f"#define NP {lay.n_params}", f"#define NY {lay.n_state}", field, FIELD_BATCH])
+    sizes = f"#define NP {lay.n_params}\n#define NY {lay.n_state}"
+    return "\n".join(
+        [PRELUDE, sizes, SCALAR, field, FIELD_BATCH, "#ifndef __CUDACC__", VECTOR, field, VECTOR_BATCH, "#endif"]
+    )
+
+
+VECTOR_BATCH = """
+int jk_field_batch_v(long n, const double *params, const double *t, const double *y, double *rate) {
+  for (long d0 = 0; d0 < n; d0 += W) {
+    vd p[NP > 0 ? NP : 1], tt, yy[NY], rr[NY];
+    for (int l = 0; l < W; l++) {
+      long d = d0 + l < n ? d0 + l : n - 1;
+      for (int i = 0; i < NP; i++) p[i][l] = params[NP * d + i];
+      for (int i = 0; i < NY; i++) yy[i][l] = y[NY * d + i];
+      tt[l] = t[d];
+    }
+    jk_field_v(p, tt, yy, rr);
+    for (int l = 0; l < W && d0 + l < n; l++)
+      for (int i = 0; i < NY; i++) rate[NY * (d0 + l) + i] = rr[i][l];
+  }
+  return 0;
+}
+"""
 
 
 @functools.lru_cache(maxsize=16)
 def kernel_source(st: Structure) -> str:
     """The complete C source (prelude, constants, generated functions, ``solver.c``)."""
     loop = resources.files(__package__).joinpath("solver.c").read_text()
-    return "\n".join([PRELUDE, _constants(st), _functions(st), loop, FIELD_BATCH])
+    return "\n".join(
+        [PRELUDE, _constants(st), _functions(st), loop, FIELD_BATCH, "#ifndef __CUDACC__", VECTOR_BATCH, "#endif"]
+    )
