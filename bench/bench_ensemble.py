@@ -224,6 +224,7 @@ def main(argv=None):
         from jaxcrank.numerics.kernel import engine
 
         threads = args.threads or engine.default_threads()
+        load_before = os.getloadavg()[0]
         base, names, xs, settings = _setup(args.revolutions, args.designs)
         k_entry, k_metrics, k_status = kernel_cpu(base, names, xs, settings, threads)
         print(json.dumps(k_entry), flush=True)
@@ -238,6 +239,7 @@ def main(argv=None):
             "cpu_speedup_vs_xla": k_entry["designs_per_s"] / x_entry["designs_per_s"],
             "ks_two_sample": ks,
             "ks_min_p_value": min(v["p_value"] for v in ks.values()),
+            "load_average_1min": {"before": load_before, "after": os.getloadavg()[0]},
         }
         old = json.loads(args.out.read_text()) if args.out.exists() else {}
         for key in ("gpu_runs", "gpu_designs_per_s", "gpu_machine", "gpu_best_batch", "gpu_fp64_fraction_of_peak"):

@@ -1,20 +1,23 @@
-"""Scalar C code from a JAX function's jaxpr: the kernel's single source of truth.
+"""C code from a JAX function's jaxpr: the kernel's single source of truth.
 
 :func:`emit_function` traces a function of fixed-shape float64 arrays with
 :func:`jax.make_jaxpr` and writes it as one straight-line C function: every array
-element becomes a scalar local (``const double vN = ...;``); slicing, reshaping,
-broadcasting, stacking and concatenation only rearrange names and emit nothing;
-dot products and reductions are written out as sums. Nested ``jit`` and
-custom-derivative calls are inlined (their primal jaxpr). Only primitives with an
-exact scalar C translation are accepted; anything else raises
-:class:`UnsupportedPrimitive` naming it, so a model change that needs a new
-primitive fails loudly at generation time, never silently in the kernel.
+element becomes a local (``const KD vN = ...;``); slicing, reshaping, broadcasting,
+stacking and concatenation only rearrange names and emit nothing; dot products and
+reductions are written out as sums, scans unrolled, run-time indexing written as
+selects (:mod:`.indexing`). Nested ``jit`` and custom-derivative calls are inlined
+(their primal jaxpr); identical expressions are computed once. Only primitives with an
+exact translation are accepted; anything else raises :class:`UnsupportedPrimitive`
+naming it, so a model change that needs a new primitive fails at generation time,
+never silently in the kernel.
 
-Rounding follows XLA's CPU lowering where it is cheap to do so: ``integer_pow`` is
-the same chain of multiplications, ``max``/``min`` propagate NaN, ``rsqrt`` is
-``1 / sqrt``. Sums of dot products may associate differently from XLA (a few ulp).
-The generated text is valid C99 and CUDA C++ (functions are declared with the
-``KFN`` macro, which the including source defines).
+The text is written in a small macro vocabulary (types ``KD``/``KB``/``KL``, selects
+``KSEL``, logic ``KAND``, libm calls ``KF1(sin, x)``, ...) that
+:mod:`.source` instantiates twice: for scalars (C and CUDA C++) and for GCC vectors of
+four designs, one per lane. Rounding follows XLA's CPU lowering where it matters:
+``integer_pow`` is the same chain of multiplications, ``max``/``min`` propagate NaN,
+``asin`` is XLA's decomposition, ``rsqrt`` is ``1 / sqrt``; sums of dot products may
+associate differently from XLA (a few ulp).
 """
 
 from __future__ import annotations
@@ -370,14 +373,14 @@ def _fuse_sincos(lines: list[str]) -> list[str]:
 def emit_function(
     name: str, fn: Callable, inputs: Sequence[tuple[str, tuple[int, ...]]], outputs: Sequence[str]
 ) -> tuple[str, list[tuple[int, ...]]]:
-    """Generate ``KFN void name(const double *in0, ..., double *out0, ...)``.
+    """Generate ``KFN void KNAME(name)(const KD *in0, ..., KD *out0, ...)``.
 
     Args:
         name: the C function's name.
         fn: a JAX function of float64 arrays with the shapes of ``inputs``,
             returning a tuple of arrays (one per entry of ``outputs``).
         inputs: (C parameter name, shape) per argument of ``fn``; a shape ``()``
-            is passed as a ``double`` by value, others as a flat row-major pointer.
+            is passed as a ``KD`` by value, others as a flat row-major pointer.
         outputs: C parameter names of the outputs (flat row-major pointers).
 
     Returns:
