@@ -25,7 +25,15 @@ jax.config.update("jax_enable_x64", True)
 from .analysis import metrics, outputs  # noqa: E402
 from .errors import CorruptFileError  # noqa: E402
 from .numerics import solve  # noqa: E402
-from .numerics.solve import DEFAULTS, SOLVERS, Simulation, SimulationError, SolveOptions, simulate  # noqa: E402
+from .numerics.solve import (  # noqa: E402
+    DEFAULTS,
+    SOLVERS,
+    Simulation,
+    SimulationError,
+    SolveOptions,
+    simulate,
+    solver_from_name,
+)
 from .physics import ideal, laws, model, params  # noqa: E402
 from .physics.laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
 from .physics.params import (  # noqa: E402
@@ -95,6 +103,7 @@ __all__ = [
     "sampling",
     "simulate",
     "solve",
+    "solver_from_name",
     "with_clearance",
     "__version__",
 ]

@@ -49,7 +49,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxcrank.analysis.metrics import RMS_METRICS
+from jaxcrank.analysis.metrics import RMS_METRICS, by_name
+from jaxcrank.analysis.metrics import stack as metrics_stack
 from jaxcrank.physics.params import ParameterError, get_parameter, paper, set_parameters
 
 from .objective import Objective, over_windows, stored_solve, tracked_solve, window_starts, windows_ok
@@ -122,10 +123,12 @@ def _safe_sqrt(x):
 
 def _terms(mean_squares):
     """The :data:`TERMS` values, (5,), from the mean squares of the signals of
-    :data:`jaxcrank.analysis.metrics.RMS_METRICS` (:func:`optim.sensitivity.deviations`' columns:
-    deg, m, m, N m and the contact forces at B and C, N)."""
-    ms = mean_squares
-    return _safe_sqrt(jnp.concatenate([ms[:4], 0.5 * (ms[4:5] + ms[5:6])]))
+    :data:`jaxcrank.analysis.metrics.RMS_METRICS`, a vector in that order
+    (:func:`optim.sensitivity.deviations`' columns), read by metric name."""
+    ms = by_name(RMS_METRICS, mean_squares)
+    terms = {k: ms[k] for k in TERMS if k in ms}
+    terms["rms_contact_force_N"] = 0.5 * (ms["rms_contact_force_B_N"] + ms["rms_contact_force_C_N"])
+    return _safe_sqrt(jnp.stack([terms[k] for k in TERMS]))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -329,7 +332,7 @@ class DesignProblem(Problem):
         sg = jax.lax.stop_gradient
         # the exact terms tracked during one solve that stores only the windows' starts
         sim = tracked_solve(sg(self.mechanism(x)), obj, obj.on_failure == "raise", grid)
-        exact = _terms(jnp.stack([sim.metrics[k] for k in RMS_METRICS]) ** 2)
+        exact = _terms(metrics_stack(RMS_METRICS, sim.metrics) ** 2)
         exact = jnp.where(sim.ok, exact, jnp.nan)
         starts = window_starts(sim)
         names, values = self.physical(x)

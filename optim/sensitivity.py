@@ -69,7 +69,7 @@ def deviations(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike,
 def metric_values(sim: Simulation) -> Float[Array, " 6"]:
     """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
     :mod:`jaxcrank.numerics.tracking`), shape (6,), in their units."""
-    return jnp.stack([sim.metrics[k] for k in METRICS])
+    return metrics.stack(METRICS, sim.metrics)
 
 
 def window_sums(

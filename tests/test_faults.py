@@ -32,7 +32,8 @@ from pathlib import Path
 import jaxcrank as jc
 from jaxcrank import sampling, sweep
 out = Path(sys.argv[1])
-settings = sweep.Settings(revolutions=0.02, samples_per_revolution=1200, metrics_from_revolution=0.0, max_steps=20000)
+settings = sweep.Settings(revolutions=0.02, samples_per_revolution=1200, metrics_from_revolution=0.0,
+                          options=jc.DEFAULTS.replace(max_steps=20000))
 names, designs = sampling.latin_hypercube({"clearance_C": (1e-4, 5e-4), "contact.restitution": (0.5, 1.0)}, 14, seed=1)
 sweep.run(jc.paper(), names, designs, settings, out=out, resume=(out / "table.csv").exists(), chunk=1,
           progress=False)

@@ -109,7 +109,10 @@ def test_drawn_designs_of_every_structure(law, layout):
 SWEEP_NAMES = ["clearance_C", "crank_speed", "contact.restitution", "contact.memory_time"]
 # 0.01 revolution (3.6 deg): 0.2..2 ms at 300..3000 rpm, the first impacts
 SWEEP_SETTINGS = sweep.Settings(
-    revolutions=0.01, samples_per_revolution=1000, metrics_from_revolution=0.0, max_steps=5000
+    revolutions=0.01,
+    samples_per_revolution=1000,
+    metrics_from_revolution=0.0,
+    options=jc.DEFAULTS.replace(max_steps=5000),
 )
 
 
@@ -350,9 +353,9 @@ def test_drawn_bad_set_on_the_command_line_is_one_named_line(text):
 @given(
     st.one_of(
         _IDENT.filter(lambda k: k not in sweep_spec._SPEC_KEYS).map(lambda k: ({k: 1}, k)),
-        _IDENT.filter(lambda k: k not in {f.name for f in sweep.dataclasses.fields(sweep.Settings)}).map(
-            lambda k: ({"simulation": {k: 1}}, k)
-        ),
+        _IDENT.filter(
+            lambda k: k not in {f.name for f in sweep.dataclasses.fields(sweep.Settings)} | set(sweep.SOLVE_KEYS)
+        ).map(lambda k: ({"simulation": {k: 1}}, k)),
         st.sampled_from(
             ["revolutions", "samples_per_revolution", "metrics_from_revolution", "rtol", "atol", "max_steps"]
         ).flatmap(

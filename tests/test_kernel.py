@@ -121,7 +121,7 @@ def test_metrics_through_the_first_impacts_agree_within_the_solve_error():
     tolerance. Peaks are taken at step ends, so two step sequences see an impact's peak
     at different instants."""
     settings = sweep.Settings(revolutions=0.02, samples_per_revolution=3600, metrics_from_revolution=0.0)
-    tight = dataclasses.replace(settings, rtol=1e-8, atol=1e-8)
+    tight = dataclasses.replace(settings, options=settings.options.replace(rtol=1e-8, atol=1e-8))
     ref, exact = jax_path(NAMES, DESIGNS, settings), jax_path(NAMES, DESIGNS, tight)
     got = engine.solve(jc.paper(), NAMES, DESIGNS, settings)
     assert np.all(got.status == 0) and list(ref["status"]) == ["ok"] * len(DESIGNS)
@@ -139,7 +139,10 @@ def test_step_budget_gives_max_steps_and_the_others_finish():
     names = ["clearance_C", "contact.memory_time"]
     designs = np.array([[2.5e-4, 1e-5], [2.5e-4, 1e-10], [3e-4, 1e-5]])
     settings = sweep.Settings(
-        revolutions=0.03, samples_per_revolution=1200, metrics_from_revolution=0.01, max_steps=20_000
+        revolutions=0.03,
+        samples_per_revolution=1200,
+        metrics_from_revolution=0.01,
+        options=jc.DEFAULTS.replace(max_steps=20_000),
     )
     ref = jax_path(names, designs, settings)
     got = engine.solve(jc.paper(), names, designs, settings)
@@ -201,14 +204,22 @@ def test_vector_lanes_equal_one_design_per_thread():
 
 def test_kernel_refuses_other_solvers():
     with pytest.raises(jc.params.ParameterError, match="tsit5"):
-        engine.solve(jc.paper(), NAMES, DESIGNS[:1], sweep.Settings(solver="kvaerno5"))
+        engine.solve(
+            jc.paper(),
+            NAMES,
+            DESIGNS[:1],
+            sweep.Settings(options=jc.DEFAULTS.replace(solver=solve_module.solver_from_name("kvaerno5"))),
+        )
 
 
 SWEEP_NAMES = ["clearance_C", "contact.memory_time"]
 # design 1: too stiff for its step budget; design 3: clearance larger than the hole (invalid)
 SWEEP_DESIGNS = np.array([[2.5e-4, 1e-5], [2.5e-4, 1e-10], [3e-4, 1e-5], [9e-3, 1e-5], [1.5e-4, 2e-5]])
 SWEEP_SHORT = sweep.Settings(
-    revolutions=0.03, samples_per_revolution=1200, metrics_from_revolution=0.01, max_steps=20_000
+    revolutions=0.03,
+    samples_per_revolution=1200,
+    metrics_from_revolution=0.01,
+    options=jc.DEFAULTS.replace(max_steps=20_000),
 )
 
 

@@ -17,7 +17,12 @@ from jaxcrank import spec as sweep_spec
 from jaxcrank.physics.params import ParameterError
 
 ROOT = Path(__file__).resolve().parents[1]
-SHORT = sweep.Settings(revolutions=0.03, samples_per_revolution=1200, metrics_from_revolution=0.01, max_steps=20_000)
+SHORT = sweep.Settings(
+    revolutions=0.03,
+    samples_per_revolution=1200,
+    metrics_from_revolution=0.01,
+    options=jc.DEFAULTS.replace(max_steps=20_000),
+)
 NAMES = ["clearance_C", "contact.memory_time"]
 # design 1: a 0.1 ns impact memory makes the solve too stiff for its step budget;
 # design 3: a clearance larger than the hole (invalid, caught before any solve)

@@ -131,7 +131,7 @@ def onsets(
     """Every contact onset of the run of ``mech`` from ``t0`` to ``t1`` (s) with the
     numerical settings ``options`` (:class:`jaxcrank.SolveOptions`; the step budget
     is ``max_steps``, which also sizes the stored steps). Returns :class:`Onsets`."""
-    solver = solve.make_solver(options.solver)
+    solver = options.solver
     controller = solve.step_size_controller(solver, options.rtol, options.atol)
     y0 = model.initial_state(mech) if y0 is None else y0
     sol = _solve_dense(

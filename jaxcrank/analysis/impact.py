@@ -70,26 +70,20 @@ def _wall_field(mech: Mechanism, pin_mass, breaks, accelerations):
 
     def field(t, y, args):
         x, v, xh, vh, memory = y
-        contact = model.joint_contact(
-            mech,
-            joint,
-            mech.crank_material,
-            mech.rod_material,
-            jnp.stack([x, 0.0]),
-            jnp.stack([v, 0.0]),
-            0.0,
-            jnp.stack([xh, 0.0]),
-            jnp.stack([vh, 0.0]),
-            0.0,
-            memory,
+        motion = model.JointMotion(
+            pin_position=jnp.stack([x, 0.0]),
+            pin_velocity=jnp.stack([v, 0.0]),
+            pin_angular_velocity=0.0,
+            hole_position=jnp.stack([xh, 0.0]),
+            hole_velocity=jnp.stack([vh, 0.0]),
+            hole_angular_velocity=0.0,
         )
+        contact = model.joint_contact(mech, joint, mech.crank_material, mech.rod_material, motion, memory)
         a_pin = contact.force_on_pin[0] / pin_mass
         a_hole = hole_acceleration(t)
-        # the memory's rate as in model.dynamics: relaxation + tracking * d(target)/dt
-        target_rate = model.memory_target_rate(
-            contact.eccentricity, jnp.stack([v - vh, 0.0]), jnp.stack([a_pin - a_hole, 0.0]), joint.clearance
+        memory_rate = model.approach_memory_rate(
+            contact, jnp.stack([v - vh, 0.0]), jnp.stack([a_pin - a_hole, 0.0]), joint.clearance
         )
-        memory_rate = contact.memory_rate + contact.memory_tracking * target_rate
         return jnp.stack([v, a_pin, vh, a_hole, memory_rate])
 
     return field

@@ -15,6 +15,8 @@ each name (``_m``, ``_N``, ``_deg``, ...).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
@@ -38,44 +40,59 @@ SIGNALS = {
     "transmission_angle_error_deg": "actual minus ideal transmission angle (paper Eq. 18)",
 }
 
-#: headline metrics: name -> (reduction, signal, meaning); units are the name's suffix
+
+class Metric(NamedTuple):
+    """How one headline metric is computed (its units are its name's suffix).
+
+    Attributes:
+        reduction: ``"max_abs"``, ``"max"`` or ``"rms"`` (:func:`reduce_signal`).
+        signal: the name of the per-sample signal it reduces (:data:`SIGNALS`).
+        meaning: what it measures, for people.
+    """
+
+    reduction: str
+    signal: str
+    meaning: str
+
+
+#: headline metrics: name -> :class:`Metric`; units are the name's suffix
 METRICS = {
-    "max_abs_rod_x_deviation_m": ("max_abs", "rod_x_deviation_m", "largest |rod-centre x - ideal|"),
-    "max_abs_slider_x_deviation_m": ("max_abs", "slider_x_deviation_m", "largest |slider x - ideal|"),
-    "max_abs_slider_ax_deviation_m_s2": (
+    "max_abs_rod_x_deviation_m": Metric("max_abs", "rod_x_deviation_m", "largest |rod-centre x - ideal|"),
+    "max_abs_slider_x_deviation_m": Metric("max_abs", "slider_x_deviation_m", "largest |slider x - ideal|"),
+    "max_abs_slider_ax_deviation_m_s2": Metric(
         "max_abs",
         "slider_ax_deviation_m_s2",
         "largest |slider acceleration - ideal|",
     ),
-    "peak_contact_force_B_N": ("max_abs", "contact_force_B_N", "largest normal contact force at B"),
-    "peak_contact_force_C_N": ("max_abs", "contact_force_C_N", "largest normal contact force at C"),
-    "max_penetration_B_m": ("max", "penetration_B_m", "largest penetration at B"),
-    "max_penetration_C_m": ("max", "penetration_C_m", "largest penetration at C"),
-    "peak_driving_moment_N_m": ("max_abs", "driving_moment_N_m", "largest |driving moment|"),
-    "rms_driving_moment_deviation_N_m": (
+    "peak_contact_force_B_N": Metric("max_abs", "contact_force_B_N", "largest normal contact force at B"),
+    "peak_contact_force_C_N": Metric("max_abs", "contact_force_C_N", "largest normal contact force at C"),
+    "max_penetration_B_m": Metric("max", "penetration_B_m", "largest penetration at B"),
+    "max_penetration_C_m": Metric("max", "penetration_C_m", "largest penetration at C"),
+    "peak_driving_moment_N_m": Metric("max_abs", "driving_moment_N_m", "largest |driving moment|"),
+    "rms_driving_moment_deviation_N_m": Metric(
         "rms",
         "driving_moment_deviation_N_m",
         "RMS of driving moment - ideal driving moment",
     ),
-    "rms_rod_x_deviation_m": ("rms", "rod_x_deviation_m", "RMS of rod-centre x - ideal"),
-    "rms_slider_x_deviation_m": ("rms", "slider_x_deviation_m", "RMS of slider x - ideal"),
-    "rms_transmission_angle_error_deg": (
+    "rms_rod_x_deviation_m": Metric("rms", "rod_x_deviation_m", "RMS of rod-centre x - ideal"),
+    "rms_slider_x_deviation_m": Metric("rms", "slider_x_deviation_m", "RMS of slider x - ideal"),
+    "rms_transmission_angle_error_deg": Metric(
         "rms",
         "transmission_angle_error_deg",
         "RMS of actual - ideal transmission angle (paper Eq. 19)",
     ),
-    "max_abs_transmission_angle_error_deg": (
+    "max_abs_transmission_angle_error_deg": Metric(
         "max_abs",
         "transmission_angle_error_deg",
         "largest |actual - ideal transmission angle|",
     ),
-    "rms_contact_force_B_N": ("rms", "contact_force_B_N", "RMS normal contact force at B (bearing wear proxy)"),
-    "rms_contact_force_C_N": ("rms", "contact_force_C_N", "RMS normal contact force at C (bearing wear proxy)"),
+    "rms_contact_force_B_N": Metric("rms", "contact_force_B_N", "RMS normal contact force at B (bearing wear proxy)"),
+    "rms_contact_force_C_N": Metric("rms", "contact_force_C_N", "RMS normal contact force at C (bearing wear proxy)"),
 }
 
 #: the metrics that are maxima: over a solve, :mod:`jaxcrank.numerics.tracking` takes them at
 #: every accepted step
-PEAK_METRICS = tuple(k for k, (reduction, _, _) in METRICS.items() if reduction in ("max_abs", "max"))
+PEAK_METRICS = tuple(k for k, m in METRICS.items() if m.reduction in ("max_abs", "max"))
 
 #: the metrics that are time averages of squares (deviations from the ideal mechanism,
 #: contact forces): the ones whose gradient the ensemble estimate of
@@ -88,12 +105,12 @@ RMS_METRICS = (
     "rms_contact_force_B_N",
     "rms_contact_force_C_N",
 )
-assert {k for k, v in METRICS.items() if v[0] == "rms"} == set(RMS_METRICS)
+assert {k for k, m in METRICS.items() if m.reduction == "rms"} == set(RMS_METRICS)
 
 
 def meanings() -> dict[str, str]:
     """Metric name -> what it measures (units in the name)."""
-    return {k: v[2] for k, v in METRICS.items()}
+    return {k: m.meaning for k, m in METRICS.items()}
 
 
 def transmission_angle_deviation(
@@ -148,7 +165,7 @@ def headline(frames: Frame, t_start: Float[ArrayLike, ""]) -> dict[str, Float[Ar
     """
     window = frames.t > t_start
     sig = signals(frames)
-    return {name: reduce_signal(reduction, sig[signal], window) for name, (reduction, signal, _) in METRICS.items()}
+    return {name: reduce_signal(m.reduction, sig[m.signal], window) for name, m in METRICS.items()}
 
 
 def window_samples(ts: Float[ArrayLike, " n"], t_start: Float[ArrayLike, ""]) -> int:
@@ -157,6 +174,27 @@ def window_samples(ts: Float[ArrayLike, " n"], t_start: Float[ArrayLike, ""]) ->
 
 
 def rms_signals(frame: Frame) -> Float[Array, "*samples rms"]:
-    """The signals behind :data:`RMS_METRICS`, stacked in that order along the last axis."""
+    """The signals behind :data:`RMS_METRICS`, stacked in that order along the last axis
+    (:func:`by_name` names the columns again)."""
     sig = signals(frame)
-    return jnp.stack([sig[METRICS[k][1]] for k in RMS_METRICS], axis=-1)
+    return jnp.stack([sig[METRICS[k].signal] for k in RMS_METRICS], axis=-1)
+
+
+def stack(names: Sequence[str], values) -> Float[Array, "*batch metrics"]:
+    """The metrics ``names`` of a mapping ``values`` (metric name -> array) stacked along
+    a new last axis, in the order of ``names``: the one way a vector of metrics is built."""
+    return jnp.stack([values[k] for k in names], axis=-1)
+
+
+def by_name(names: Sequence[str], vector: Float[ArrayLike, "*batch metrics"]) -> dict[str, Float[Array, "*batch"]]:
+    """A vector of metrics (last axis in the order of ``names``, e.g. :data:`RMS_METRICS`
+    for :func:`rms_signals`) as a dict metric name -> array: the one way a metric is read
+    back out of a vector, so no caller indexes it by position.
+
+    Raises:
+        ValueError: if the last axis does not have one entry per name.
+    """
+    vector = jnp.asarray(vector)
+    if vector.shape[-1] != len(names):
+        raise ValueError(f"a vector of {vector.shape[-1]} metrics cannot hold the {len(names)} metrics {list(names)}")
+    return {k: vector[..., j] for j, k in enumerate(names)}

@@ -25,6 +25,8 @@ import platform
 import re
 import warnings
 
+from .. import _private
+
 OPTION = "xla_cpu_small_while_loop_byte_threshold"
 THRESHOLD_BYTES = 1_000_000_000
 ISA_FLAG = "--xla_cpu_max_isa"
@@ -59,14 +61,7 @@ def with_options(flags: str) -> str:
 
 
 def _backend_started() -> bool:
-    # JAX has no public API that says whether a backend has started; this is the
-    # one place jaxcrank reads a private module of another package.
-    try:
-        from jax._src import xla_bridge
-    except ImportError:  # pragma: no cover - layout of a future JAX
-        return False
-    started = getattr(xla_bridge, "backends_are_initialized", None)
-    return bool(started()) if started is not None else False
+    return _private.backends_started()
 
 
 def configure(environ=os.environ, machine: str | None = None) -> str:

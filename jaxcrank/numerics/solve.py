@@ -23,12 +23,15 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .. import _private
 from ..physics import model
 from ..physics.params import Mechanism, ParameterError
 from . import tracking
 from .linalg import DenseInverse
 from .rosenbrock import Rodas4
 
+#: Solver names, for text only (TOML files, the CLI): name -> diffrax solver class.
+#: :func:`solver_from_name` turns a name into the instance the library takes.
 SOLVERS = {
     "kvaerno5": diffrax.Kvaerno5,
     "kvaerno4": diffrax.Kvaerno4,
@@ -40,37 +43,93 @@ SOLVERS = {
 }
 
 
+def solver_from_name(name: str) -> diffrax.AbstractAdaptiveSolver:
+    """The diffrax solver named ``name`` (a key of :data:`SOLVERS`): where text comes
+    in (TOML files, the CLI). The implicit Runge-Kutta ones (Kvaerno) use diffrax's
+    chord Newton method at the step-size controller's tolerances, with
+    :class:`jaxcrank.numerics.linalg.DenseInverse` for its linear solves instead of
+    lineax's LU, a LAPACK call that keeps XLA from compiling the solver loop into one
+    kernel.
+
+    Raises:
+        ParameterError: for an unknown name (the message lists the valid ones).
+    """
+    if not isinstance(name, str) or name not in SOLVERS:
+        raise ParameterError(f"solver {name!r} is unknown; valid: {', '.join(SOLVERS)}")
+    cls = SOLVERS[name]
+    if issubclass(cls, diffrax.AbstractImplicitSolver):
+        chord = diffrax.with_stepsize_controller_tols(diffrax.VeryChord)(linear_solver=DenseInverse())
+        return cls(root_finder=chord)
+    return cls()
+
+
+def solver_name(solver: diffrax.AbstractSolver) -> str:
+    """The :data:`SOLVERS` name of a solver instance (for text out: summaries, TOML),
+    or its class name for a solver that has none."""
+    for name, cls in SOLVERS.items():
+        if type(solver) is cls:
+            return name
+    return type(solver).__name__
+
+
+def make_solver(name: str = "tsit5") -> diffrax.AbstractAdaptiveSolver:
+    """Same as :func:`solver_from_name` (kept for scripts that use this name)."""
+    return solver_from_name(name)
+
+
 @dataclasses.dataclass(frozen=True)
 class SolveOptions:
     """The numerical settings of a solve: the one place their defaults live
     (:func:`simulate`, sweeps, design objectives and the CLI all start from these).
 
     Attributes:
-        solver: a name in :data:`SOLVERS`.
+        solver: a diffrax adaptive solver instance (default ``diffrax.Tsit5()``);
+            text names (TOML, CLI) go through :func:`solver_from_name`.
         rtol, atol: error tolerances on the dimensionless state
             (:func:`jaxcrank.physics.model.state_scales`), > 0.
         dt0: initial step, s, > 0.
         max_steps: step budget (accepted and rejected steps), >= 1.
 
     Raises:
-        ParameterError: for an unknown solver or a non-positive setting.
+        ParameterError: for a solver that is not a diffrax adaptive solver instance
+            (a name among them: the message says how to turn it into one) or a
+            non-positive setting.
     """
 
-    solver: str = "tsit5"
+    solver: diffrax.AbstractAdaptiveSolver = diffrax.Tsit5()
     rtol: float = 1e-6
     atol: float = 1e-6
     dt0: float = 1e-6
     max_steps: int = 500_000
 
     def __post_init__(self):
-        if self.solver not in SOLVERS:
-            raise ParameterError(f"solver {self.solver!r} is unknown; valid: {', '.join(SOLVERS)}")
+        if isinstance(self.solver, str):
+            hint = f"solver_from_name({self.solver!r})" if self.solver in SOLVERS else "a diffrax solver instance"
+            raise ParameterError(
+                f"solver = {self.solver!r} is a name: pass {hint} (names, for text input: {', '.join(SOLVERS)})"
+            )
+        if not isinstance(self.solver, diffrax.AbstractAdaptiveSolver):
+            raise ParameterError(
+                f"solver = {self.solver!r} must be a diffrax adaptive solver instance, e.g. diffrax.Tsit5()"
+            )
         for name in ("rtol", "atol", "dt0"):
             value = getattr(self, name)
-            if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
+            if isinstance(value, bool) or not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
                 raise ParameterError(f"{name} = {value!r} must be a finite number > 0")
-        if not (isinstance(self.max_steps, numbers.Integral) and self.max_steps >= 1):
+        steps = self.max_steps
+        if isinstance(steps, bool) or not (isinstance(steps, numbers.Integral) and steps >= 1):
             raise ParameterError(f"max_steps = {self.max_steps!r} must be an integer >= 1")
+
+    @classmethod
+    def from_text(cls, solver: str | None = None, **changes) -> SolveOptions:
+        """The defaults with ``changes``, the solver given by name (TOML files, the
+        CLI; :func:`solver_from_name`). ``None`` values are ignored."""
+        return DEFAULTS.replace(solver=None if solver is None else solver_from_name(solver), **changes)
+
+    @property
+    def solver_name(self) -> str:
+        """The solver's name (:func:`solver_name`), for text out."""
+        return solver_name(self.solver)
 
     def replace(self, **changes) -> SolveOptions:
         """A copy with the given fields changed (``None`` values are ignored)."""
@@ -78,7 +137,7 @@ class SolveOptions:
 
 
 DEFAULTS = SolveOptions()
-DEFAULT_SOLVER = DEFAULTS.solver
+DEFAULT_SOLVER = DEFAULTS.solver_name
 
 
 class SimulationError(RuntimeError):
@@ -113,20 +172,6 @@ class Simulation(eqx.Module):
         return self.result == diffrax.RESULTS.successful
 
 
-def make_solver(name: str = DEFAULT_SOLVER):
-    """A diffrax solver by name (``SOLVERS``). The implicit Runge-Kutta ones (Kvaerno)
-    use diffrax's chord Newton method at the step-size controller's tolerances, with
-    :class:`jaxcrank.numerics.linalg.DenseInverse` for its linear solves instead of lineax's
-    LU, a LAPACK call that keeps XLA from compiling the solver loop into one kernel."""
-    if name not in SOLVERS:
-        raise ValueError(f"solver {name!r} is unknown; valid names: {', '.join(SOLVERS)}")
-    cls = SOLVERS[name]
-    if issubclass(cls, diffrax.AbstractImplicitSolver):
-        chord = diffrax.with_stepsize_controller_tols(diffrax.VeryChord)(linear_solver=DenseInverse())
-        return cls(root_finder=chord)
-    return cls()
-
-
 def step_size_controller(solver, rtol, atol):
     """The adaptive step-size controller :func:`simulate` uses with ``solver``: PI
     control for implicit solvers, I control for explicit ones; RMS norm of the scaled
@@ -145,7 +190,7 @@ def _with_tolerances(solver, controller):
     if not isinstance(solver, diffrax.AbstractImplicitSolver):
         return solver
     finder = solver.root_finder
-    names = [n for n in ("rtol", "atol", "norm") if type(getattr(finder, n)).__name__ == "_UseStepSizeTol"]
+    names = [n for n in ("rtol", "atol", "norm") if _private.is_stepsize_controller_tolerance(getattr(finder, n))]
     return eqx.tree_at(
         lambda s: tuple(getattr(s.root_finder, n) for n in names), solver, tuple(getattr(controller, n) for n in names)
     )
@@ -251,7 +296,8 @@ def simulate(
             pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.
         options: the numerical settings (:class:`SolveOptions`).
         solver, rtol, atol, dt0, max_steps: override the field of ``options`` of the
-            same name when given; ``solver`` may also be a diffrax solver instance.
+            same name when given. ``solver`` is a diffrax solver instance; a name
+            (:data:`SOLVERS`) is still taken, through :func:`solver_from_name`.
         adjoint: diffrax adjoint (default ``RecursiveCheckpointAdjoint``, exact
             reverse-mode gradients of the discrete solve). For ``jax.jacfwd`` /
             ``jax.jvp`` pass ``diffrax.ForwardMode()``: with a few parameters it is
@@ -285,12 +331,10 @@ def simulate(
         ts = sample_times(mech, t1, n_samples) if ts is None else ts
         ts = jnp.asarray(ts, dtype=float)
         span = (ts[0], ts[-1], int(ts.shape[0]))
-    instance = solver if solver is not None and not isinstance(solver, str) else None
-    options = options.replace(
-        solver=None if instance is not None else solver, rtol=rtol, atol=atol, dt0=dt0, max_steps=max_steps
-    )
-    solver = make_solver(options.solver) if instance is None else instance
-    rtol, atol, dt0, max_steps = options.rtol, options.atol, options.dt0, options.max_steps
+    if isinstance(solver, str):
+        solver = solver_from_name(solver)
+    options = options.replace(solver=solver, rtol=rtol, atol=atol, dt0=dt0, max_steps=max_steps)
+    solver, rtol, atol, dt0, max_steps = options.solver, options.rtol, options.atol, options.dt0, options.max_steps
     controller = step_size_controller(solver, rtol, atol)
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
     meter = diffrax.TqdmProgressMeter(refresh_steps=5000) if progress else diffrax.NoProgressMeter()

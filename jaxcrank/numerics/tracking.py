@@ -48,15 +48,15 @@ class Running(NamedTuple):
 
 
 def _initial_peaks():
-    return jnp.array([-jnp.inf if metrics.METRICS[k][0] == "max" else 0.0 for k in metrics.PEAK_METRICS])
+    return jnp.array([-jnp.inf if metrics.METRICS[k].reduction == "max" else 0.0 for k in metrics.PEAK_METRICS])
 
 
 def _peak_values(frame: model.Frame):
     sig = metrics.signals(frame)
     out = []
     for name in metrics.PEAK_METRICS:
-        reduction, signal, _ = metrics.METRICS[name]
-        out.append(jnp.abs(sig[signal]) if reduction == "max_abs" else sig[signal])
+        m = metrics.METRICS[name]
+        out.append(jnp.abs(sig[m.signal]) if m.reduction == "max_abs" else sig[m.signal])
     return jnp.stack(out)
 
 
@@ -146,11 +146,10 @@ def finish(running: Running) -> dict[str, Array]:
     """The metrics of :data:`jaxcrank.analysis.metrics.METRICS` (plus
     ``peak_contact_force_{B,C}_whole_run_N``) from the accumulators of a finished
     solve; units as in the names. A window without samples gives an RMS of 0."""
-    out = {k: running.peaks[..., j] for j, k in enumerate(metrics.PEAK_METRICS)}
+    out = metrics.by_name(metrics.PEAK_METRICS, running.peaks)
     n = jnp.maximum(running.count, 1)[..., None]
-    rms = jnp.sqrt(running.sums / n)
-    out.update({k: rms[..., j] for j, k in enumerate(metrics.RMS_METRICS)})
+    out.update(metrics.by_name(metrics.RMS_METRICS, jnp.sqrt(running.sums / n)))
+    whole_run = metrics.by_name(metrics.PEAK_METRICS, running.whole_run_peaks)
     for joint in "BC":
-        j = metrics.PEAK_METRICS.index(f"peak_contact_force_{joint}_N")
-        out[f"peak_contact_force_{joint}_whole_run_N"] = running.whole_run_peaks[..., j]
+        out[f"peak_contact_force_{joint}_whole_run_N"] = whole_run[f"peak_contact_force_{joint}_N"]
     return {k: out[k] for k in list(metrics.METRICS) + [f"peak_contact_force_{j}_whole_run_N" for j in "BC"]}

@@ -29,6 +29,8 @@ from pathlib import Path
 import jax
 from jax import export as jax_export
 
+from .. import _private
+
 #: Environment variable naming the cache folder; ``0`` or ``off`` turns caching off.
 ENV = "JAXCRANK_CACHE_DIR"
 
@@ -80,19 +82,14 @@ def checks_as_nan():
     cached; the caller must check their results for NaN.
 
     Equinox offers this only process-wide (``EQX_ON_ERROR=nan``, read once at its
-    import); this is the one place jaxcrank sets equinox's module setting, for a block.
+    import); :func:`jaxcrank._private.equinox_checks_as_nan` sets its module setting
+    for the block.
     JAX keeps the traces of inner jitted functions for the process, checks included:
     inside jaxcrank's solve these are only diffrax's checks of the sample times that
     :func:`jaxcrank.numerics.solve.simulate` builds (increasing, within the span), which cannot fail.
     """
-    from equinox import _errors
-
-    before = _errors.EQX_ON_ERROR
-    _errors.EQX_ON_ERROR = "nan"
-    try:
+    with _private.equinox_checks_as_nan():
         yield
-    finally:
-        _errors.EQX_ON_ERROR = before
 
 
 @functools.cache

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import json
 import platform
 import sys
@@ -14,11 +13,10 @@ import time
 from pathlib import Path
 
 from .. import __version__
-
-from . import config
 from ..errors import CorruptFileError
-from ..physics.params import ParameterError, paper, parameter_unit
 from ..numerics.solve import DEFAULTS, SOLVERS, SimulationError
+from ..physics.params import ParameterError, paper, parameter_unit
+from . import config
 
 
 def _simulate_parser(sub):
@@ -45,7 +43,10 @@ def _simulate_parser(sub):
         "--samples-per-degree", type=float, default=10.0, help="output samples per degree of crank angle (default 10)"
     )
     p.add_argument(
-        "--solver", choices=sorted(SOLVERS), default=DEFAULTS.solver, help=f"ODE solver (default {DEFAULTS.solver})"
+        "--solver",
+        choices=sorted(SOLVERS),
+        default=DEFAULTS.solver_name,
+        help=f"ODE solver (default {DEFAULTS.solver_name})",
     )
     p.add_argument(
         "--rtol",
@@ -82,10 +83,8 @@ def run_simulate(args) -> int:
     import numpy as np
 
     from ..analysis import outputs
-
-    from . import plots
-
     from ..numerics import solve
+    from . import plots
 
     mech = config.load(args.config) if args.config else paper()
     overrides = list(args.overrides)
@@ -102,7 +101,7 @@ def run_simulate(args) -> int:
     config.save(mech, out / "config.toml")
 
     start = time.perf_counter()
-    options = solve.SolveOptions(solver=args.solver, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+    options = solve.SolveOptions.from_text(solver=args.solver, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     # Metrics after the first revolution (the start-up impacts left out); a run that
     # ends within it is summarised over its whole length, and says so.
     period = float(mech.period)
@@ -250,7 +249,6 @@ def run_sweep(args) -> int:
     import jax
 
     from ..analysis import metrics
-
     from . import engines, plots, sweep
     from . import spec as spec_module
 
@@ -295,7 +293,7 @@ def run_sweep(args) -> int:
             "workers": args.workers,
             "chunk": chunk,
             "engine": engine,
-            "settings": dataclasses.asdict(spec.settings),
+            "settings": spec.settings.to_text(),
             "versions": _versions(),
             "metric_meanings": metrics.meanings(),
         }

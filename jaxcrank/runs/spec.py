@@ -12,9 +12,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from . import config
 from ..analysis.metrics import METRICS
 from ..physics.params import Mechanism, ParameterError, get_parameter, parameter_unit
+from . import config
 from .sampling import Tolerance, full_factorial, latin_hypercube, monte_carlo, one_at_a_time, random_uniform
 from .sweep import Settings
 
@@ -46,11 +46,7 @@ def spec_from_dict(d: Mapping) -> Spec:
     if sampling not in SAMPLINGS:
         raise ParameterError(f"sampling {sampling!r} is unknown; valid: {', '.join(SAMPLINGS)}")
     base = config.from_dict(d.get("mechanism", {}))
-    sim = dict(d.get("simulation", {}))
-    fields = {f.name for f in dataclasses.fields(Settings)}
-    if set(sim) - fields:
-        raise ParameterError(f"unknown [simulation] keys {sorted(set(sim) - fields)}; valid: {sorted(fields)}")
-    settings = Settings(**sim)
+    settings = Settings.from_text(dict(d.get("simulation", {})))
     metrics = list(d.get("metrics", METRICS))
     if set(metrics) - set(METRICS):
         raise ParameterError(f"unknown metrics {sorted(set(metrics) - set(METRICS))}; valid: {list(METRICS)}")

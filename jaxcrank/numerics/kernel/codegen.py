@@ -22,7 +22,6 @@ associate differently from XLA (a few ulp).
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Callable, Sequence
 
@@ -31,10 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.extend import core as jex_core
 
-
-class UnsupportedPrimitive(NotImplementedError):
-    """The traced function uses a primitive the generator cannot write as scalar C."""
-
+from . import indexing
+from .text import _FOLD, UnsupportedPrimitive, _array, _ctype, _value, _Writer, literal
 
 _BINARY = {"add": "+", "add_any": "+", "sub": "-", "mul": "*", "div": "/"}
 _COMPARE = {"gt": ">", "lt": "<", "ge": ">=", "le": "<=", "eq": "==", "ne": "!="}
@@ -61,88 +58,6 @@ _IDENTITY = {"stop_gradient", "copy", "copy_p", "optimization_barrier", "reduce_
 _CALLS = {"jit", "pjit", "closed_call", "core_call", "remat", "checkpoint", "custom_jvp_call", "custom_vjp_call"}
 
 
-def literal(value) -> str:
-    """A C literal of a float, int or bool (infinities, NaN and booleans as the prelude's macros)."""
-    if isinstance(value, (bool, np.bool_)):
-        return "KTRUE" if value else "KFALSE"
-    if isinstance(value, (int, np.integer)):
-        return f"{int(value)}L"
-    v = float(value)
-    if math.isnan(v):
-        return "KNAN"
-    if math.isinf(v):
-        return "KINF" if v > 0 else "(-KINF)"
-    text = repr(v)
-    return text if ("e" in text or "." in text) else text + ".0"
-
-
-def _value(expr):
-    """The Python value of a literal written by :func:`literal`, or None for a C expression."""
-    if not isinstance(expr, str):
-        return None
-    if expr.endswith("L") and expr[:-1].lstrip("-").isdigit():
-        return int(expr[:-1])
-    if expr in ("KTRUE", "KFALSE"):
-        return expr == "KTRUE"
-    try:
-        return float(expr)
-    except ValueError:
-        return None
-
-
-_FOLD = {
-    "+": lambda a, b: a + b,
-    "-": lambda a, b: a - b,
-    "*": lambda a, b: a * b,
-    ">": lambda a, b: a > b,
-    "<": lambda a, b: a < b,
-    ">=": lambda a, b: a >= b,
-    "<=": lambda a, b: a <= b,
-    "==": lambda a, b: a == b,
-    "!=": lambda a, b: a != b,
-}
-
-
-def _ctype(dtype) -> str:
-    """The generated code's type macro: ``KD`` (float64), ``KB`` (bool), ``KL`` (integers)."""
-    dtype = np.dtype(dtype)
-    if dtype == np.bool_:
-        return "KB"
-    if np.issubdtype(dtype, np.integer):
-        return "KL"
-    if dtype != np.float64:
-        raise UnsupportedPrimitive(f"dtype {dtype}: the kernel computes in float64 only")
-    return "KD"
-
-
-class _Writer:
-    """Emits C statements and names their results."""
-
-    def __init__(self):
-        self.lines: list[str] = []
-        self.count = 0
-        self.seen: dict[tuple[str, str], str] = {}
-
-    def new(self, expr: str, dtype) -> str:
-        """The name of ``expr``'s value: a new local, or the one an identical expression
-        already has (every expression is pure, so this common-subexpression elimination
-        is exact)."""
-        key = (expr, _ctype(dtype))
-        if key in self.seen:
-            return self.seen[key]
-        name = f"v{self.count}"
-        self.seen[key] = name
-        self.count += 1
-        ctype = _ctype(dtype)
-        wrap = "KV" if ctype == "KD" else "KVL"  # a statement of literals alone is a scalar: broadcast it
-        self.lines.append(f"  const {ctype} {name} = {wrap}({expr});")
-        return name
-
-
-def _array(x) -> np.ndarray:
-    return np.asarray(x, dtype=object)
-
-
 def _elementwise(w: _Writer, fmt: Callable[..., str], dtype, *args) -> np.ndarray:
     arrays = np.broadcast_arrays(*[_array(a) for a in args])
     out = np.empty(arrays[0].shape, dtype=object)
@@ -167,15 +82,6 @@ def _integer_pow(w: _Writer, x: str, y: int, dtype) -> str:
         if n > 0:
             base = w.new(f"{base} * {base}", dtype)
     return w.new(f"1.0 / {acc}", dtype) if recip else acc
-
-
-def _sum(w: _Writer, terms: Sequence[str], dtype) -> str:
-    if not terms:
-        return literal(0.0)
-    acc = terms[0]
-    for t in terms[1:]:
-        acc = w.new(f"{acc} + {t}", dtype)
-    return acc
 
 
 def _folded(w: _Writer, op: str, dtype, a, b) -> np.ndarray:
@@ -293,7 +199,7 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
             out[idx] = (b if known else a) if known is not None else w.new(f"{select}({c}, {b}, {a})", dtype)
         return [out]
     if name == "scan":
-        return indexing.scan(w, eqn, ins)
+        return indexing.scan(w, eqn, ins, _run)
     if name == "argmax":
         return [indexing.argmax(w, ins[0], tuple(p["axes"]), p["index_dtype"])]
     if name == "dynamic_slice":
@@ -413,6 +319,3 @@ def emit_function(
     params += [f"KD *KRESTRICT {n}" for n in outputs]
     head = f"KFN void KNAME({name})({', '.join(params)})"
     return head + " {\n" + "\n".join(body) + "\n}\n", shapes
-
-
-from . import indexing  # noqa: E402  (indexing uses this module's helpers)

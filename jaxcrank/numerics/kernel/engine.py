@@ -154,10 +154,12 @@ def solve(
     metrics window, tolerances, step budget).
 
     Raises:
-        ParameterError: when ``settings.solver`` is not tsit5 (the kernel's only solver).
+        ParameterError: when ``settings.options.solver`` is not tsit5 (the kernel's only solver).
     """
-    if settings.solver != "tsit5":
-        raise ParameterError(f"the kernel engine solves with tsit5 only, not {settings.solver!r}: use engine='xla'")
+    if settings.options.solver_name != "tsit5":
+        raise ParameterError(
+            f"the kernel engine solves with tsit5 only, not {settings.options.solver_name!r}: use engine='xla'"
+        )
     xs = np.atleast_2d(np.asarray(xs, dtype=np.float64))
     periods = np.array([float(set_parameters(base, list(names), [float(v) for v in x]).period) for x in xs])
     o = settings.options

@@ -57,8 +57,8 @@ def solve(base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, block
     """
     import cupy
 
-    if settings.solver != "tsit5":
-        raise ParameterError(f"the kernel engine solves with tsit5 only, not {settings.solver!r}")
+    if settings.options.solver_name != "tsit5":
+        raise ParameterError(f"the kernel engine solves with tsit5 only, not {settings.options.solver_name!r}")
     xs = np.atleast_2d(np.asarray(xs, dtype=np.float64))
     n = len(xs)
     periods = np.array([float(set_parameters(base, list(names), [float(v) for v in x]).period) for x in xs])

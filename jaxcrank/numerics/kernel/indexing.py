@@ -10,13 +10,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .codegen import UnsupportedPrimitive, _array, _sum, _value, _Writer, literal
-
-
-def _codegen():
-    from . import codegen
-
-    return codegen
+from .text import UnsupportedPrimitive, _array, _sum, _value, _Writer, literal
 
 
 def _select(dtype) -> str:
@@ -65,13 +59,12 @@ def reduce(w: _Writer, x: np.ndarray, axes, combine: Callable[[str, str], str], 
     return out
 
 
-def scan(w: _Writer, eqn, ins) -> list[np.ndarray]:
-    """A scan of static length, unrolled."""
+def scan(w: _Writer, eqn, ins, run: Callable) -> list[np.ndarray]:
+    """A scan of static length, unrolled (``run``: the generator's jaxpr interpreter)."""
     p = eqn.params
     if p["reverse"]:
         raise UnsupportedPrimitive("scan with reverse=True")
     body, consts = p["jaxpr"].jaxpr, p["jaxpr"].consts
-    run = _codegen()._run
     nc, nk = p["num_consts"], p["num_carry"]
     fixed, carry, xs = ins[:nc], list(ins[nc : nc + nk]), ins[nc + nk :]
     ys = []

@@ -1,0 +1,64 @@
+"""The one place jaxcrank reads or sets private parts of other packages.
+
+Each function here stands for something the package offers no public API for; the
+rest of jaxcrank calls these functions and never imports a private module itself
+(``tests/test_structure.py`` checks that). Checked against jax 0.10.2,
+equinox 0.13.8 and diffrax 0.7.2; each access falls back to a safe answer where the
+private name has moved.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+
+def backends_started() -> bool:
+    """Whether JAX has started a backend (after which ``XLA_FLAGS`` no longer act).
+
+    JAX has no public query for this: ``jax.extend.backend.backends()`` starts them.
+    Private: ``jax._src.xla_bridge.backends_are_initialized``. Falls back to False.
+    """
+    try:
+        from jax._src import xla_bridge
+    except ImportError:  # pragma: no cover - layout of a future JAX
+        return False
+    started = getattr(xla_bridge, "backends_are_initialized", None)
+    return bool(started()) if started is not None else False
+
+
+@contextlib.contextmanager
+def equinox_checks_as_nan():
+    """While tracing inside this block, ``equinox.error_if`` checks (diffrax uses them on
+    traced times) return NaN instead of compiling a host callback that raises.
+
+    Equinox offers this only process-wide, through the ``EQX_ON_ERROR=nan`` environment
+    variable read once at its import; its ``on_error`` argument is not reachable for
+    the checks inside diffrax. Private: the module setting
+    ``equinox._errors.EQX_ON_ERROR``, set for the block and restored after it.
+    """
+    from equinox import _errors
+
+    before = _errors.EQX_ON_ERROR
+    _errors.EQX_ON_ERROR = "nan"
+    try:
+        yield
+    finally:
+        _errors.EQX_ON_ERROR = before
+
+
+def is_stepsize_controller_tolerance(value) -> bool:
+    """Whether ``value`` (a root finder's ``rtol``, ``atol`` or ``norm``) is diffrax's
+    placeholder "take it from the step-size controller"
+    (``diffrax.with_stepsize_controller_tols``), which ``diffeqsolve`` fills in only for
+    an implicit solver it sees directly.
+
+    diffrax exports the wrapper but not the placeholder. Private: its class
+    ``diffrax._root_finder._with_tols._UseStepSizeTol`` (a class test, not the singleton's
+    identity: a solver sent to a worker process is a copy); where it has moved, any
+    value of a class of that name.
+    """
+    try:
+        from diffrax._root_finder._with_tols import _UseStepSizeTol
+    except ImportError:  # pragma: no cover - layout of a future diffrax
+        return type(value).__name__ == "_UseStepSizeTol"
+    return isinstance(value, _UseStepSizeTol)

@@ -1,0 +1,139 @@
+"""A sweep's files: the table (CSV, one row per design, appended one whole batch at a
+time) and atomic writes, and the checks that a table on disk belongs to this sweep."""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from jaxtyping import Shaped
+
+from ..analysis.metrics import METRICS
+from ..errors import CorruptFileError
+from ..physics.params import parameter_unit
+from .sweep_design import STATUSES
+
+
+def columns(names: Sequence[str]) -> list[str]:
+    """Column names of a sweep table over ``names``: ``index``, one ``<name>_<unit>``
+    per parameter, ``status``, ``message``, :data:`METRICS`, ``steps``."""
+    return ["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + ["status", "message"] + list(METRICS) + ["steps"]
+
+
+def read_table(path) -> dict[str, Shaped[np.ndarray, " rows"]]:
+    """A sweep table (CSV) as columns: numbers as float arrays (empty cells NaN),
+    ``status`` and ``message`` as string arrays; rows sorted by ``index``.
+
+    Raises:
+        CorruptFileError: the file has no header, a row with more or fewer cells than
+            the header (a truncated or corrupted file), a cell that is not a number
+            where one belongs, an unknown status or a repeated index; the message
+            names the file and the line.
+    """
+    path = Path(path)
+    with open(path, newline="") as f:
+        try:
+            lines = list(csv.reader(f))
+        except csv.Error as err:
+            raise CorruptFileError(f"{path}: not a readable CSV table ({err})") from None
+    if not lines or "index" not in lines[0] or "status" not in lines[0]:
+        raise CorruptFileError(f"{path}: no sweep table header (index, ..., status, ...) on line 1")
+    header, rows, seen = lines[0], [], set()
+    for n, cells in enumerate(lines[1:], start=2):
+        if len(cells) != len(header):
+            raise CorruptFileError(
+                f"{path}: line {n} has {len(cells)} cells where the header has "
+                f"{len(header)}: the table is truncated or corrupted"
+            )
+        row = dict(zip(header, cells))
+        for key, v in row.items():
+            if key in ("status", "message"):
+                continue
+            try:
+                float(v) if v != "" else None
+            except ValueError:
+                raise CorruptFileError(f"{path}: line {n}: {key} = {v!r} is not a number") from None
+        if not row["index"].isdigit():
+            raise CorruptFileError(f"{path}: line {n}: index = {row['index']!r} is not a design number")
+        if row["status"] not in STATUSES:
+            raise CorruptFileError(f"{path}: line {n}: unknown status {row['status']!r}")
+        if row["index"] in seen:
+            raise CorruptFileError(f"{path}: line {n}: design index {row['index']} appears twice")
+        seen.add(row["index"])
+        rows.append(row)
+    return table_from_rows(rows)
+
+
+def table_from_rows(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
+    """Rows of CSV cells (strings) as columns sorted by ``index`` (see :func:`read_table`)."""
+    if not rows:
+        return {}
+    rows = sorted(rows, key=lambda r: int(r["index"]))
+    out = {}
+    for key in rows[0]:
+        vals = [r[key] for r in rows]
+        if key in ("status", "message"):
+            out[key] = np.array(vals, dtype=object)
+        else:
+            out[key] = np.array([float(v) if v != "" else np.nan for v in vals])
+    out["index"] = out["index"].astype(int)
+    return out
+
+
+def csv_text(rows) -> str:
+    buf = io.StringIO()
+    csv.writer(buf).writerows(rows)
+    return buf.getvalue()
+
+
+def append(path: Path, text: str) -> None:
+    """Append ``text`` with one ``write`` call on an ``O_APPEND`` descriptor, then fsync:
+    a process killed at any point leaves the batch's rows either all in the table or
+    none (the kernel finishes a write to a regular file that has started)."""
+    data = text.encode()
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+    try:
+        written = os.write(fd, data)
+        while written < len(data):  # only on a full disk, which then raises
+            written += os.write(fd, data[written:])
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def atomic_write(path: Path, write) -> None:
+    """Write a file through a temporary file and a rename: readers see the old file or
+    the whole new one, never a part."""
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        write(f)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def resumable_rows(path: Path, cols, names, designs) -> set[int]:
+    """Indices of the designs already in the table at ``path``, after checking that the
+    table belongs to this sweep: its header, indices and parameter values (exact)."""
+    table = read_table(path)
+    with open(path, newline="") as f:
+        header = next(csv.reader(f), None)
+    if header != cols:
+        raise CorruptFileError(
+            f"{path}: its columns {header} are not this sweep's {cols}; the table is "
+            "corrupted or from another sweep (move it away to start over)"
+        )
+    for k, i in enumerate(table.get("index", [])):
+        if not 0 <= i < len(designs):
+            raise CorruptFileError(f"{path}: design index {i} is outside this sweep's 0..{len(designs) - 1}")
+        given = [table[c][k] for c in cols[1 : 1 + len(names)]]
+        if not np.array_equal(given, designs[i], equal_nan=True):
+            raise CorruptFileError(
+                f"{path}: the row of design {i} holds parameters {given}, not this "
+                f"sweep's {list(designs[i])}; the table is corrupted or from another sweep"
+            )
+    return {int(i) for i in table.get("index", [])}
