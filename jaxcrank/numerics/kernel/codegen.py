@@ -22,6 +22,7 @@ associate differently from XLA (a few ulp).
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable, Sequence
 
@@ -58,12 +59,64 @@ _IDENTITY = {"stop_gradient", "copy", "copy_p", "optimization_barrier", "reduce_
 _CALLS = {"jit", "pjit", "closed_call", "core_call", "remat", "checkpoint", "custom_jvp_call", "custom_vjp_call"}
 
 
-def _elementwise(w: _Writer, fmt: Callable[..., str], dtype, *args) -> np.ndarray:
+def _kmax(a, b):
+    return a + b if math.isnan(a) or math.isnan(b) else max(a, b)
+
+
+def _kmin(a, b):
+    return a + b if math.isnan(a) or math.isnan(b) else min(a, b)
+
+
+#: float64 operations computed here when every operand is a literal, as XLA's constant
+#: folding computes them (IEEE arithmetic, the host's libm): the generated code then
+#: holds the value XLA's program holds
+_HOST = {
+    "add": lambda a, b: a + b,
+    "add_any": lambda a, b: a + b,
+    "sub": lambda a, b: a - b,
+    "mul": lambda a, b: a * b,
+    "div": lambda a, b: a / b if b != 0.0 else math.copysign(math.inf, a) * math.copysign(1.0, b) if a else math.nan,
+    "max": _kmax,
+    "min": _kmin,
+    "neg": lambda a: -a,
+    "square": lambda a: a * a,
+    "sqrt": math.sqrt,
+    "rsqrt": lambda a: 1.0 / math.sqrt(a),
+    "sin": math.sin,
+    "cos": math.cos,
+    "exp": math.exp,
+    "abs": abs,
+    "pow": math.pow,
+    "atan2": math.atan2,
+    "asin": lambda a: 2.0 * math.atan2(a, 1.0 + math.sqrt((1.0 - a) * (1.0 + a))),
+}
+
+
+def _elementwise(w: _Writer, fmt: Callable[..., str], dtype, *args, host=None) -> np.ndarray:
+    """One statement per element; computed here instead when ``host`` (a Python function
+    of floats) is given and every operand is a literal."""
     arrays = np.broadcast_arrays(*[_array(a) for a in args])
     out = np.empty(arrays[0].shape, dtype=object)
     for idx in np.ndindex(out.shape):
-        out[idx] = w.new(fmt(*[a[idx] for a in arrays]), dtype)
+        operands = [a[idx] for a in arrays]
+        values = [_value(o) for o in operands]
+        if host is not None and all(isinstance(v, float) for v in values):
+            try:
+                out[idx] = literal(float(host(*values)))
+                continue
+            except (ValueError, OverflowError, ZeroDivisionError):
+                pass  # a domain error: leave it to the C code
+        out[idx] = w.new(fmt(*operands), dtype)
     return out
+
+
+def _divide(a: str, b: str) -> str:
+    """``a / b``; by a literal, the product with its reciprocal, as XLA's algebraic
+    simplifier rewrites a division by a constant of the traced program."""
+    v = _value(b)
+    if isinstance(v, float) and v != 0.0 and math.isfinite(v):
+        return f"{a} * {literal(1.0 / v)}"
+    return f"{a} / {b}"
 
 
 def _integer_pow(w: _Writer, x: str, y: int, dtype) -> str:
@@ -152,12 +205,15 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
         op = _BINARY.get(name) or _COMPARE[name]
         if np.issubdtype(eqn.invars[0].aval.dtype, np.integer) and op in _FOLD:
             return [_folded(w, op, dtype, *ins)]
-        return [_elementwise(w, lambda a, b: f"{a} {op} {b}", dtype, *ins)]
+        host = _HOST.get(name) if dtype == np.float64 else None
+        if name == "div" and dtype == np.float64:
+            return [_elementwise(w, _divide, dtype, *ins, host=host)]
+        return [_elementwise(w, lambda a, b: f"{a} {op} {b}", dtype, *ins, host=host)]
     if name in ("max", "min"):
-        return [_elementwise(w, lambda a, b: f"K{name.upper()}({a}, {b})", dtype, *ins)]
+        return [_elementwise(w, lambda a, b: f"K{name.upper()}({a}, {b})", dtype, *ins, host=_HOST[name])]
     if name in _UNARY:
         fn = _UNARY[name]
-        return [_elementwise(w, lambda a: f"KF1({fn}, {a})", dtype, *ins)]
+        return [_elementwise(w, lambda a: f"KF1({fn}, {a})", dtype, *ins, host=_HOST.get(name))]
     simple = {
         "neg": lambda a: f"-{a}",
         # XLA's decomposition of asin (chlo.asin), not libm's: the same rounding
@@ -170,7 +226,8 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
         "logistic": lambda a: f"1.0 / (1.0 + KF1(exp, -{a}))",
     }
     if name in simple:
-        return [_elementwise(w, simple[name], dtype, *ins)]
+        host = _HOST.get(name) if dtype == np.float64 else None
+        return [_elementwise(w, simple[name], dtype, *ins, host=host)]
     if name in ("and", "or"):
         if dtype == np.bool_:
             macro = "KAND" if name == "and" else "KOR"
@@ -179,7 +236,7 @@ def _primitive(w: _Writer, eqn, ins) -> list[np.ndarray]:
         return [_elementwise(w, lambda a, b: f"{a} {op} {b}", dtype, *ins)]
     if name in ("pow", "atan2", "nextafter", "rem"):
         fn = {"pow": "pow", "atan2": "atan2", "nextafter": "nextafter", "rem": "fmod"}[name]
-        return [_elementwise(w, lambda a, b: f"KF2({fn}, {a}, {b})", dtype, *ins)]
+        return [_elementwise(w, lambda a, b: f"KF2({fn}, {a}, {b})", dtype, *ins, host=_HOST.get(name))]
     if name == "integer_pow":
         x = ins[0]
         out = np.empty(x.shape, dtype=object)
@@ -277,7 +334,10 @@ def _fuse_sincos(lines: list[str]) -> list[str]:
 
 
 def emit_function(
-    name: str, fn: Callable, inputs: Sequence[tuple[str, tuple[int, ...]]], outputs: Sequence[str]
+    name: str,
+    fn: Callable,
+    inputs: Sequence[tuple[str, tuple[int, ...]]],
+    outputs: Sequence[str],
 ) -> tuple[str, list[tuple[int, ...]]]:
     """Generate ``KFN void KNAME(name)(const KD *in0, ..., KD *out0, ...)``.
 
