@@ -405,6 +405,47 @@ def table_sweep_gpu() -> str:
     return "\n".join(out)
 
 
+def table_ensemble() -> str:
+    """The ensemble kernel against the XLA sweep: designs/s per engine, compile time, KS test."""
+    d = results("ensemble")
+    rows = [
+        [
+            r["engine"],
+            r["device"],
+            r["parallel"],
+            r["batch"],
+            r["designs"],
+            r["compile_s"],
+            r["designs_per_s"],
+            r["failed"],
+        ]
+        for r in d["runs"] + d.get("gpu_runs", [])
+    ]
+    out = (
+        f"Workload: {d['workload']}\n\n"
+        + table(
+            ["engine", "device", "in parallel", "batch", "designs", "compile [s]", "designs/s after compile", "failed"],
+            rows,
+        )
+        + f"\nKernel over XLA on this CPU, after compilation: **{ratio(d['cpu_speedup_vs_xla'])}**. "
+        + (
+            f"GPU: **{fmt(d['gpu_designs_per_s'])} designs/s** at a batch of {d['gpu_best_batch']} "
+            f"({fmt(100 * d['gpu_fp64_fraction_of_peak'])} % of fp64 peak). "
+            if "gpu_designs_per_s" in d
+            else "GPU: not measured. "
+        )
+        + f"Two-sample KS test of every metric between the engines: smallest p = {fmt(d['ks_min_p_value'])}.\n"
+    )
+    if "load_average_1min" in d:
+        load = d["load_average_1min"]
+        out += (
+            f"\nThe machine was shared while this ran (1-minute load average {fmt(load['before'])} before, "
+            f"{fmt(load['after'])} after, on {d['machine'].get('cpus_usable', '?')} CPUs): both engines' "
+            "absolute rates are below a quiet machine's; their ratio is the measurement.\n"
+        )
+    return out + source("ensemble")
+
+
 def table_optim() -> str:
     d = results("optim")
     g, a, n = d["grid"], d["adam_ensemble_gradient"], d["nelder_mead"]
@@ -634,6 +675,7 @@ TABLES = {
     "paper_assumptions": table_paper_assumptions,
     "sweep": table_sweep,
     "sweep_gpu": table_sweep_gpu,
+    "ensemble": table_ensemble,
     "optim": table_optim,
     "design_gradient": table_design_gradient,
     "window_gradients": table_window_gradients,

@@ -210,7 +210,9 @@ TOML spec (SI units; every key but [parameters] optional):
                        # solver = "tsit5", rtol = 1e-6, atol = 1e-6, max_steps = 500000
   [mechanism]          # the base mechanism, as in `jaxcrank simulate`'s config.toml
 
-Several CPU cores: --workers N (N local processes). Several devices: every local
+Engines: --engine kernel (default where a C compiler is available: one design per CPU
+thread, tsit5 only, chunk default 16 per thread) or --engine xla (every solver; several
+CPU cores: --workers N local processes). Several devices: every local
 device is used (a GPU machine's GPUs). Several machines: see docs/sweeps.md, "On a cluster".
 """
 
@@ -241,6 +243,14 @@ def _sweep_parser(p):
         default=1,
         help="local processes solving designs in parallel, e.g. one per CPU core (default 1)",
     )
+    p.add_argument(
+        "--engine",
+        choices=("kernel", "xla"),
+        default=None,
+        help="kernel: each design's solve in one compiled C function, one design per CPU thread (tsit5; "
+        "the default where a C compiler is available, for tsit5 without --workers or --distributed); "
+        "xla: the compiled JAX solve (every solver)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -250,7 +260,7 @@ def run_sweep(args) -> int:
 
     from ..analysis import metrics
     from ..physics.params import parameter_unit
-    from . import plots, sweep
+    from . import engines, plots, sweep
     from . import spec as spec_module
 
     if args.distributed or args.coordinator:
@@ -263,8 +273,11 @@ def run_sweep(args) -> int:
         out.mkdir(parents=True, exist_ok=True)
         (out / "spec.toml").write_text(args.spec.read_text())
     start = time.perf_counter()
+    distributed = bool(args.distributed or args.coordinator)
+    engine = args.engine or engines.default_engine(spec.settings, args.workers, distributed)
     # the chunk this sweep uses (on a GPU derived from its free memory), reported below
-    chunk = sweep.resolve_chunk(spec.base, spec.names, spec.settings, spec.chunk)
+    chunk = spec.chunk if spec.chunk is not None or engine == "xla" else engines.default_chunk()
+    chunk = sweep.resolve_chunk(spec.base, spec.names, spec.settings, chunk)
     table = sweep.run(
         spec.base,
         spec.names,
@@ -275,6 +288,7 @@ def run_sweep(args) -> int:
         chunk=chunk,
         workers=args.workers,
         progress=not args.quiet,
+        engine=engine,
     )
     wall = time.perf_counter() - start
     if jax.process_index() != 0:
@@ -289,6 +303,7 @@ def run_sweep(args) -> int:
             "processes": jax.process_count(),
             "workers": args.workers,
             "chunk": chunk,
+            "engine": engine,
             "settings": spec.settings.to_text(),
             "versions": _versions(),
             "metric_meanings": metrics.meanings(),

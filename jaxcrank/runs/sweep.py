@@ -111,6 +111,7 @@ def run(
     chunk: int | None = None,
     workers: int = 1,
     progress: bool = True,
+    engine: str = "xla",
 ) -> dict[str, Shaped[np.ndarray, " designs"]]:
     """Simulate every design and return the table (as :func:`read_table`).
 
@@ -130,8 +131,17 @@ def run(
         workers: local processes that solve chunks in parallel (one per CPU core is
             the fastest on a CPU); 1 solves in this process. Not with ``jax.distributed``.
         progress: tqdm progress bar.
+        engine: ``"xla"`` (the compiled JAX solve above) or ``"kernel"`` (the
+            per-trajectory C kernel of :mod:`jaxcrank.numerics.kernel`: tsit5 only, one
+            design per CPU thread, ``workers`` must be 1; ``chunk`` is then the designs per
+            kernel call and checkpoint, default :func:`jaxcrank.runs.engines.default_chunk`).
+            Same table, statuses and resume; a resumed sweep keeps its engine (the two
+            round differently, which impact chaos amplifies).
     """
+    from . import engines
+
     settings = SweepSettings() if settings is None else settings
+    engines.check(engine, settings, workers)
     names = list(names)
     designs = np.atleast_2d(np.asarray(designs, dtype=float))
     if designs.shape[1] != len(names):
@@ -192,8 +202,9 @@ def run(
     # a multiple of the device count; one shape for every chunk (one compilation)
     n_dev = jax.device_count()
     given = chunk is not None
+    chunk = engines.default_chunk() if engine == "kernel" and chunk is None else chunk
     chunk = resolve_chunk(base, names, settings, chunk)
-    if given and todo:
+    if given and todo and engine == "xla":
         check_chunk_fits(base, names, settings, chunk // n_dev, free_device_bytes())
     if int(workers) < 1:
         raise ParameterError(f"workers = {workers} must be >= 1")
@@ -203,7 +214,7 @@ def run(
     for s in range(0, len(todo), chunk):
         idx = todo[s : s + chunk]
         xs = designs[idx]
-        if len(idx) < chunk:  # one compiled shape: pad with copies of the last design
+        if len(idx) < chunk and engine == "xla":  # one compiled shape: pad with copies of the last design
             xs = np.concatenate([xs, np.repeat(xs[-1:], chunk - len(idx), axis=0)])
         chunks.append((idx, xs))
 
@@ -226,8 +237,9 @@ def run(
         if workers > 1 and chunks:
             run_in_workers(base, names, settings, chunks, int(workers), record)
         else:
+            evaluate = _evaluate if engine == "xla" else engines.kernel_evaluate
             for idx, xs in chunks:
-                record(idx, _evaluate(base, names, settings, xs))
+                record(idx, evaluate(base, names, settings, xs))
     if path is not None:
         if jax.process_count() > 1:
             from jax.experimental import multihost_utils

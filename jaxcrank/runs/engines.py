@@ -1,0 +1,70 @@
+"""The engines a sweep can solve its designs with.
+
+- ``"xla"``: :func:`jaxcrank.simulate` compiled by XLA (alone or in ``vmap`` batches,
+  one process or several workers): the differentiable reference;
+- ``"kernel"``: :mod:`jaxcrank.numerics.kernel`, each design's adaptive tsit5 solve in
+  one compiled C function, one design per CPU thread: the same model (generated from
+  it), solver, controller and metrics, for throughput. Needs a C compiler.
+
+:func:`default_engine` is the kernel where it can run the sweep, else XLA.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..physics.params import ParameterError
+
+ENGINES = ("kernel", "xla")
+
+
+def kernel_available() -> bool:
+    """Whether the kernel engine can be used here (a C compiler is on the PATH)."""
+    from ..numerics.kernel import engine
+
+    return engine.available()
+
+
+def default_engine(settings=None, workers: int = 1, distributed: bool = False) -> str:
+    """``"kernel"`` where it can run the sweep (a C compiler, the tsit5 solver, one
+    process: no ``workers`` and no ``jax.distributed`` job), else ``"xla"``."""
+    fits = (settings is None or settings.options.solver_name == "tsit5") and int(workers) == 1 and not distributed
+    return "kernel" if fits and kernel_available() else "xla"
+
+
+def default_chunk() -> int:
+    """Designs per kernel call (and per checkpoint) when a sweep gives none: 16 per thread."""
+    from ..numerics.kernel import engine
+
+    return 16 * engine.default_threads()
+
+
+def check(engine: str, settings, workers: int) -> None:
+    """Raise :class:`ParameterError` for an unknown engine, or a kernel sweep with a
+    solver other than tsit5, several worker processes, a ``jax.distributed`` job or no
+    C compiler."""
+    if engine not in ENGINES:
+        raise ParameterError(f"engine = {engine!r} is unknown; valid: {', '.join(ENGINES)}")
+    if engine != "kernel":
+        return
+    if settings.options.solver_name != "tsit5":
+        raise ParameterError(
+            f"the kernel engine solves with tsit5 only, not solver = {settings.options.solver_name!r}: use xla"
+        )
+    if int(workers) != 1:
+        raise ParameterError(f"workers = {workers}: the kernel engine uses one thread per core itself; use workers = 1")
+    import jax
+
+    if jax.process_count() > 1:
+        raise ParameterError("the kernel engine runs in one process: use engine = 'xla' in a jax.distributed job")
+    if not kernel_available():
+        raise ParameterError("the kernel engine needs a C compiler (gcc or cc, or $CC): install one or use xla")
+
+
+def kernel_evaluate(base, names, settings, xs):
+    """Metrics (n, len(METRICS)), status codes and accepted steps of designs ``xs`` (n, k)
+    by the kernel: :func:`jaxcrank.runs.sweep._evaluate`'s contract."""
+    from ..numerics.kernel import engine
+
+    out = engine.solve(base, names, np.asarray(xs), settings)
+    return out.metrics, out.status, out.steps
