@@ -48,6 +48,10 @@ def designs():
     nine = next(p for p in runs if p["n_variables"] == 9)
     for run in nine["methods"]["ours"]["runs"]:
         out[f"ours_seed{run['seed']}"] = run["final_SI"]
+    for label, unit in (("cma_best_slider_mass_mid_box", 0.5), ("cma_best_slider_mass_upper", 1.0)):
+        x = list(out["cma_best"])
+        x[6] = 1.0 + unit * 1.5  # slider_mass, box 1-2.5 kg
+        out[label] = x
     return out
 
 
@@ -103,6 +107,8 @@ def main():
         return prob.mechanism(jnp.asarray(lo) + u * jnp.asarray(hi - lo))
 
     rows = []
+    if args.only and args.out.exists():  # rerun some designs, keep the others' rows
+        rows = [r for r in json.loads(args.out.read_text())["designs"] if r["design"] not in args.only]
     for name, x in designs().items():
         if args.only and name not in args.only:
             continue
@@ -121,7 +127,11 @@ def main():
         row.update(value_deg=float(value), gradient_ift=grad.tolist(), first_call_s=time.perf_counter() - start)
         centre_mech = build(jnp.asarray(u0))
         settled = jc.simulate(
-            centre_mech, ts=jnp.arange(args.revolutions + 1) * float(centre_mech.period), rtol=1e-10, atol=1e-10
+            centre_mech,
+            ts=jnp.arange(args.revolutions + 1) * float(centre_mech.period),
+            rtol=1e-10,
+            atol=1e-10,
+            max_steps=10_000_000,
         ).ys[-1]
 
         def continued(u, centre=centre_mech, y=settled):

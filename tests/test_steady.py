@@ -156,7 +156,8 @@ def _settled(u, revolutions=30):
     """A long plain simulation from rest (no shooting): the mechanism and its section
     state after ``revolutions``."""
     mech = _build(jnp.asarray(u))
-    sim = jc.simulate(mech, ts=jnp.arange(revolutions + 1) * float(mech.period), rtol=1e-10, atol=1e-10)
+    ts = jnp.arange(revolutions + 1) * float(mech.period)
+    sim = jc.simulate(mech, ts=ts, rtol=1e-10, atol=1e-10, max_steps=10_000_000)
     return mech, sim.ys[-1]
 
 
@@ -177,6 +178,7 @@ def _continued_value(centre, u, revolutions=10):
         save_samples=False,
         rtol=1e-10,
         atol=1e-10,
+        max_steps=10_000_000,
     )
     return float(sim.metrics[KEY])
 
@@ -202,19 +204,26 @@ def _check_gradient(u0, h=1e-3):
 
 
 def _periodic_designs():
-    """Unit-box designs of the nine-variable problem recorded in bench/results: CMA-ES's and
-    the projected Adam's best of the design study, the three Adam runs of the head-to-head."""
+    """Unit-box designs of the nine-variable problem that are periodic: CMA-ES's and the
+    projected Adam's best of the design study, two Adam runs of the head-to-head
+    (bench/results), and CMA-ES's best with the slider mass at mid-box and at its upper
+    bound (one and then both approach-speed memories active on the orbit)."""
     prob = _design_problem()
     lo, hi = np.array(prob.lower), np.array(prob.upper)
     study = json.loads((ROOT / "bench" / "results" / "design_study.json").read_text())["optimum"]
     runs = json.loads((ROOT / "bench" / "results" / "design.json").read_text())["problems"]
     nine = next(p for p in runs if p["n_variables"] == 9)["methods"]["ours"]["runs"]
-    xs = [study["cma_design_SI"], study["adam_design_SI"]] + [r["final_SI"] for r in nine]
-    return [(np.asarray(x) - lo) / (hi - lo) for x in xs]
+    xs = [study["cma_design_SI"], study["adam_design_SI"]] + [r["final_SI"] for r in nine[:2]]
+    units = [(np.asarray(x) - lo) / (hi - lo) for x in xs]
+    for slider in (0.5, 1.0):
+        u = units[0].copy()
+        u[prob.names.index("slider_mass")] = slider
+        units.append(u)
+    return units
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("index", range(5))
+@pytest.mark.parametrize("index", range(6))
 def test_exact_gradient_against_long_run_differences(index):
     _check_gradient(_periodic_designs()[index])
 

@@ -131,7 +131,7 @@ class SteadyState(eqx.Module):
     metrics: dict
     lyapunov_exponent_per_s: Float[Array, ""]
     statistics: dict | None
-    revolutions: dict = eqx.field(static=True)
+    revolutions: dict
     options: SolveOptions = eqx.field(static=True)
     samples_per_revolution: int = eqx.field(static=True)
 
