@@ -245,3 +245,20 @@ def test_cli_writes_summary_orbit_and_section_plot(periodic, tmp_path):
     for name in ("orbit.csv", "poincare_section.png", "config.toml", "figures/slider_x.png"):
         assert (out / name).exists(), name
     assert cli.main(["steady", "--out", str(out), "--settle-revolutions", "0"]) == 2
+
+
+@pytest.mark.slow
+def test_period_three_orbit_against_a_long_run():
+    """The third Adam run of the head-to-head settles onto an orbit of period 3 revolutions
+    that is still settling after the default 20: found through the closest recurrence."""
+    runs = json.loads((ROOT / "bench" / "results" / "design.json").read_text())["problems"]
+    x = next(p for p in runs if p["n_variables"] == 9)["methods"]["ours"]["runs"][2]["final_SI"]
+    mech = _design_problem().mechanism(jnp.asarray(x))
+    steady = steady_state(mech)
+    assert steady.periodic and steady.period_revolutions == 3 and steady.multiplier_moduli[0] < 1.0
+    n = 2 * model.n_dof(mech)
+    long = jc.simulate(mech, ts=jnp.arange(81) * float(mech.period), rtol=1e-10, atol=1e-10, max_steps=10_000_000)
+    ys = np.asarray(long.ys)[:, :n]
+    assert np.max(np.abs(ys[-1] - ys[-4])) <= 1e-6 < 1e-2 < np.max(np.abs(ys[-1] - ys[-2]))
+    y = np.asarray(steady.section_state)[:n]
+    assert min(np.max(np.abs(ys[-j] - y)) for j in (1, 2, 3)) <= 1e-6

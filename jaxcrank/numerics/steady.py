@@ -234,7 +234,9 @@ def steady_state(
         max_period: the longest period looked for, revolutions (>= 1).
         recurrence_tol: section points of the settle closer than this (max over the
             dynamic entries, scaled units: clearances and clearance x crank speed) mark
-            a candidate period for shooting.
+            a candidate period for shooting. When none does, the period with the closest
+            recurrence is shot if it is within 100 x ``recurrence_tol`` (an orbit still
+            settling), and a failure there means not periodic.
         newton_tol: Newton shooting stops at ``max |Phi^k(y) - y| <= newton_tol``,
             scaled units. Keep it above the map's noise, about 100 x ``options.rtol``.
         max_newton: Newton iterations at most (0: only check the settle's end).
@@ -301,6 +303,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
             result=shooting.failure(sim.result), regime="not periodic", residual=jnp.asarray(np.inf), **empty
         )
     z_end = section[-1, :m]
+    distances = {}
     if warm_k:
         candidates = [warm_k]
     else:
@@ -308,6 +311,10 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
             k: float(jnp.max(jnp.abs(z_end - section[-1 - k, :m]))) for k in range(1, min(max_period, n_settle) + 1)
         }
         candidates = [k for k, d in distances.items() if d <= recurrence_tol]
+    # a slowly settling orbit: shoot the closest recurrence; failing there means not periodic
+    near = not candidates and bool(distances) and min(distances.values()) <= 100 * recurrence_tol
+    if near:
+        candidates = [min(distances, key=distances.get)]
     failure = None
     for k in candidates:
         z, jac, active, res, its, result = shooting.shoot(mech, z_end, k, None, options, newton_tol, max_newton)
@@ -333,7 +340,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         )
         return SteadyState(result=RESULTS.successful, regime="periodic", residual=res, **fields)
     else:
-        if failure is not None:
+        if failure is not None and not near:
             if warm_k:  # the warm start was too far: settle from there and start over
                 return _steady(mech, section[-1], 0, settle, max_period, recurrence_tol, newton_tol, max_newton,
                                n_stats, batch, samples, options, counts)  # fmt: skip
