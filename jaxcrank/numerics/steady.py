@@ -394,7 +394,7 @@ def orbit_start(mech: Mechanism, steady: SteadyState) -> Float[Array, " state"]:
     Raises:
         SteadyStateError: when ``steady`` is not periodic (no orbit to differentiate).
 
-    Forward mode only: reverse mode (``jax.grad``) raises inside JAX."""
+    Forward mode only: reverse mode (``jax.grad``) is not supported."""
     if not steady.periodic:
         raise SteadyStateError(
             f"orbit_start needs a periodic steady state; this one is {steady.regime!r} "
