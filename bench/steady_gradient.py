@@ -55,13 +55,14 @@ def designs():
     return out
 
 
-def _tracked(mech, revolutions, y0=None):
-    """Eq. 19 over revolution ``revolutions + 1`` of a plain simulation (rtol = atol = 1e-10)."""
+def _tracked(mech, revolutions, y0=None, k=1):
+    """Eq. 19 over the ``k`` revolutions after ``revolutions`` of a plain simulation
+    (rtol = atol = 1e-10)."""
     period = float(mech.period)
     sim = jc.simulate(
         mech,
-        t1=(revolutions + 1) * period,
-        n_samples=(revolutions + 1) * 3600 + 1,
+        t1=(revolutions + k) * period,
+        n_samples=(revolutions + k) * 3600 + 1,
         y0=y0,
         metrics_start=revolutions * period,
         save_samples=False,
@@ -134,19 +135,21 @@ def main():
             max_steps=10_000_000,
         ).ys[-1]
 
-        def continued(u, centre=centre_mech, y=settled):
+        k = steady.period_revolutions
+
+        def continued(u, centre=centre_mech, y=settled, k=k):
             mech = build(jnp.asarray(u))
-            return _tracked(mech, args.cont, carry_state(centre, y, mech).at[-2:].set(0.0))
+            return _tracked(mech, args.cont, carry_state(centre, y, mech).at[-2:].set(0.0), k)
 
         def shooting(u, previous=steady):
             return float(jc.steady_state(build(jnp.asarray(u)), warm_start=previous).metrics[KEY])
 
         row["from_rest"] = _compare(
-            grad, _differences(lambda u: _tracked(build(jnp.asarray(u)), args.revolutions), u0, args.h_rest)
+            grad, _differences(lambda u, k=k: _tracked(build(jnp.asarray(u)), args.revolutions, k=k), u0, args.h_rest)
         )
         row["continued"] = _compare(grad, _differences(continued, u0, args.h))
         row["shooting"] = _compare(grad, _differences(shooting, u0, args.h))
-        row["long_run_value_deg"] = _tracked(centre_mech, args.revolutions)
+        row["long_run_value_deg"] = _tracked(centre_mech, args.revolutions, k=k)
         warm = []
         for sign in (1, -1):
             t0 = time.perf_counter()
