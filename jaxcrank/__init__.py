@@ -1,11 +1,11 @@
 """jaxcrank: a differentiable simulator of slider-crank mechanisms with joint clearances.
 
 The public API is what ``__all__`` lists. The modules live in four layers, each
-importing only from the ones before it (one exception: the numerics' ``tracking``
-reads the metric definitions of ``analysis.metrics``, which need the physics alone):
+importing only from the ones before it (one exception: the numerics' ``tracking`` and ``shooting``
+read the metric definitions of ``analysis.metrics``, which need the physics alone):
 
 - ``jaxcrank.physics``: ``params``, ``laws``, ``ideal``, ``model``, ``reference``;
-- ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``;
+- ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``, ``steady``;
 - ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
   ``analysis.validation`` (``wall_impact``, ``memory_audit``);
 - ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
@@ -40,6 +40,7 @@ from .numerics.solve import (  # noqa: E402
     simulate,
     solver_from_name,
 )
+from .numerics.steady import SteadyState, SteadyStateError, steady_state  # noqa: E402
 from .physics import ideal, laws, model, params  # noqa: E402
 from .physics.laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
 from .physics.params import (  # noqa: E402
@@ -60,6 +61,7 @@ _LAZY = {
     "linalg": "numerics.linalg",
     "rosenbrock": "numerics.rosenbrock",
     "tracking": "numerics.tracking",
+    "shooting": "numerics.shooting",
     "impact": "analysis.validation.wall_impact",
     "audit": "analysis.validation.memory_audit",
     "sweep": "runs.sweep",
@@ -98,6 +100,8 @@ __all__ = [
     "Simulation",
     "SimulationError",
     "SolveOptions",
+    "SteadyState",
+    "SteadyStateError",
     "config",
     "ideal",
     "laws",
@@ -110,6 +114,7 @@ __all__ = [
     "simulate",
     "solve",
     "solver_from_name",
+    "steady_state",
     "with_clearance",
     "__version__",
 ]

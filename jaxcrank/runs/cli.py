@@ -1,6 +1,6 @@
 """Command line: ``jaxcrank simulate [--config FILE | --design RESULT_JSON] [--out DIR]
-[--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]`` and
-``jaxcrank optimize`` (:mod:`optim.cli`).
+[--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]``, ``jaxcrank steady``
+(:mod:`jaxcrank.runs.steady_cli`) and ``jaxcrank optimize`` (:mod:`optim.cli`).
 
 A command's options are added, and JAX imported, only once the command is named:
 ``jaxcrank --help`` lists the commands without loading JAX."""
@@ -21,6 +21,7 @@ from .. import __version__
 COMMANDS = {
     "simulate": "simulate the clearance mechanism and write data, summary and figures",
     "sweep": "simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo), alone or in vmap batches",
+    "steady": "find the steady state: periodic orbit and its Floquet multipliers, or chaos and long-run statistics",
     "optimize": "minimise the RMS transmission-angle error (paper Eq. 19) or a design objective with optax",
 }
 
@@ -352,6 +353,10 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
             _simulate_parser(p)
         elif name == "sweep":
             _sweep_parser(p)
+        elif name == "steady":
+            from . import steady_cli
+
+            steady_cli.add_arguments(p)
         else:
             from optim import cli as optim_cli
 
@@ -366,6 +371,7 @@ def main(argv=None) -> int:
 
     from ..errors import CorruptFileError
     from ..numerics.solve import SimulationError
+    from ..numerics.steady import SteadyStateError
     from ..physics.params import ParameterError
 
     try:
@@ -373,11 +379,15 @@ def main(argv=None) -> int:
             return run_simulate(args)
         if args.command == "sweep":
             return run_sweep(args)
+        if args.command == "steady":
+            from . import steady_cli
+
+            return steady_cli.run(args)
         if args.command == "optimize":
             from optim import cli as optim_cli
 
             return optim_cli.run(args)
-    except (ParameterError, SimulationError, CorruptFileError) as err:
+    except (ParameterError, SimulationError, SteadyStateError, CorruptFileError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)
         return 2
     except OSError as err:  # unwritable or full output directory, missing input file, ...
