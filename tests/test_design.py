@@ -7,6 +7,7 @@ import dataclasses
 import math
 import tomllib
 
+import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -15,13 +16,15 @@ import tomli_w
 
 from jaxcrank.physics.params import ParameterError
 from optim import cli
-from optim import objective as O
 from optim.design import DESIGN_VARIABLES, TERMS, DesignProblem, design_problem, geometry, ideal_stroke
+from optim.objective import Ensemble, Pathwise
 from optim.optimize import Settings, optimize
+from optim.optimizers import adam
+from optim.search import pathwise_of
 
-# A non-chaotic window for exact-gradient checks (as tests/test_optim.py's EXACT):
+# A non-chaotic window for exact-gradient checks (as tests/test_objectives.py's EXACT):
 # the first 1.2 ms, tight tolerances, pathwise derivative.
-EXACT = O.Objective(t_start=0.0, t_end=1.2e-3, method="pathwise", rtol=1e-10, atol=1e-10, max_steps=100_000)
+EXACT = Pathwise(t_start=0.0, t_end=1.2e-3, rtol=1e-10, atol=1e-10, max_steps=100_000)
 
 
 def test_geometry_holds_the_stroke_transmission_and_assembly_over_the_box():
@@ -141,7 +144,8 @@ def term_gradients(exact_problem):
 
     def all_terms(u):
         x = prob.from_unit(u)
-        return jnp.append(prob.terms(x)[0], prob.cost(x))
+        t = prob.terms(x)
+        return jnp.append(jnp.stack([t[k] for k in TERMS]), prob.cost(x))
 
     terms = jax.jit(all_terms)
     jac = np.asarray(jax.jit(jax.jacrev(all_terms))(u0))
@@ -198,7 +202,7 @@ def test_constraints_hold_at_every_iterate_of_an_optimisation_path(exact_problem
     objective: every iterate has the stroke within 0.1 mm, alpha_min >= 40 deg and
     L2 > L1 + e."""
     prob = exact_problem
-    res = optimize(prob, Settings(max_iterations=6, learning_rate=0.5, gtol=0.0, xtol=0.0), progress=False)
+    res = optimize(prob, Settings(optimizer=adam(0.5), max_iterations=6, gtol=0.0, xtol=0.0), progress=False)
     xs = np.array([[h[f"{n}_SI"] for n in prob.names] for h in res["history"]])
     assert len(xs) == 6
     c = prob.constraints(xs)
@@ -282,13 +286,20 @@ def test_ensemble_terms_have_the_exact_values_and_finite_gradients():
     """The ensemble objective of the design problem (short window, tsit5 windows):
     values equal the forward solve's terms, gradients finite, and the objective's
     gradient is the weighted sum of the terms' gradients plus the cost's."""
-    prob = design_problem(O.Objective(t_start=0.02, t_end=0.03, window_solver="tsit5"))
+    obj = Ensemble(t_start=0.02, t_end=0.03, window_solver="tsit5", window_adjoint=diffrax.RecursiveCheckpointAdjoint())
+    prob = design_problem(obj)
     x = jnp.asarray(prob.from_unit(prob.start_unit()))
-    vals = np.asarray(prob.ensemble_terms(x))
-    exact = np.asarray(prob.terms(x)[0])
+
+    def stacked(x):
+        t = prob.terms(x)
+        return jnp.stack([t[k] for k in TERMS])
+
+    vals = np.asarray(stacked(x))
+    exact = np.asarray(jnp.stack(list(prob.with_objective(pathwise_of(obj)).terms(x).values())))
     np.testing.assert_allclose(vals, exact, rtol=1e-12)
-    jac = np.asarray(jax.jacrev(prob.ensemble_terms)(x))
+    jac = np.asarray(jax.jacrev(stacked)(x))
     g = np.asarray(jax.grad(prob.objective_value)(x))
     assert np.all(np.isfinite(jac)) and np.all(np.isfinite(g))
-    expect = np.asarray(prob.weight_vector()) @ jac + np.asarray(jax.grad(prob.cost)(x))
+    w = prob.weight_of()
+    expect = np.array([w[k] for k in TERMS]) @ jac + np.asarray(jax.grad(prob.cost)(x))
     np.testing.assert_allclose(g, expect, rtol=1e-10, atol=1e-14 * np.max(np.abs(expect)))
