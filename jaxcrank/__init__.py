@@ -1,11 +1,11 @@
 """jaxcrank: a differentiable simulator of slider-crank mechanisms with joint clearances.
 
 The public API is what ``__all__`` lists. The modules live in four layers, each
-importing only from the ones before it (one exception: the numerics' ``tracking``
-reads the metric definitions of ``analysis.metrics``, which need the physics alone):
+importing only from the ones before it (one exception: the numerics' ``tracking`` and ``shooting``
+read the metric definitions of ``analysis.metrics``, which need the physics alone):
 
 - ``jaxcrank.physics``: ``params``, ``laws``, ``ideal``, ``model``, ``reference``;
-- ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``;
+- ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``, ``steady``;
 - ``jaxcrank.analysis``: ``metrics``, ``outputs``, ``impact``, ``audit``;
 - ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
 
@@ -26,6 +26,7 @@ from .analysis import metrics, outputs  # noqa: E402
 from .errors import CorruptFileError  # noqa: E402
 from .numerics import solve  # noqa: E402
 from .numerics.solve import DEFAULTS, SOLVERS, Simulation, SimulationError, SolveOptions, simulate  # noqa: E402
+from .numerics.steady import SteadyState, SteadyStateError, steady_state  # noqa: E402
 from .physics import ideal, laws, model, params  # noqa: E402
 from .physics.laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
 from .physics.params import (  # noqa: E402
@@ -46,6 +47,8 @@ _LAZY = {
     "linalg": "numerics",
     "rosenbrock": "numerics",
     "tracking": "numerics",
+    "steady": "numerics",
+    "shooting": "numerics",
     "impact": "analysis",
     "audit": "analysis",
     "sweep": "runs",
@@ -84,6 +87,8 @@ __all__ = [
     "Simulation",
     "SimulationError",
     "SolveOptions",
+    "SteadyState",
+    "SteadyStateError",
     "config",
     "ideal",
     "laws",
@@ -95,6 +100,7 @@ __all__ = [
     "sampling",
     "simulate",
     "solve",
+    "steady_state",
     "with_clearance",
     "__version__",
 ]

@@ -1,6 +1,6 @@
 """Command line: ``jaxcrank simulate [--config FILE] [--out DIR] [overrides]``,
-``jaxcrank sweep --spec FILE [--out DIR] [--resume]`` and ``jaxcrank optimize``
-(:mod:`optim.cli`)."""
+``jaxcrank sweep --spec FILE [--out DIR] [--resume]``, ``jaxcrank steady``
+(:mod:`jaxcrank.runs.steady_cli`) and ``jaxcrank optimize`` (:mod:`optim.cli`)."""
 
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from . import config
 from ..errors import CorruptFileError
 from ..physics.params import ParameterError, paper, parameter_unit
 from ..numerics.solve import DEFAULTS, SOLVERS, SimulationError
+from ..numerics.steady import SteadyStateError
 
 
 def _simulate_parser(sub):
@@ -312,6 +313,9 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     _simulate_parser(sub)
     _sweep_parser(sub)
+    from . import steady_cli
+
+    steady_cli.add_parser(sub)
     from optim import cli as optim_cli
 
     optim_cli.add_parser(sub)
@@ -321,9 +325,11 @@ def main(argv=None) -> int:
             return run_simulate(args)
         if args.command == "sweep":
             return run_sweep(args)
+        if args.command == "steady":
+            return steady_cli.run(args)
         if args.command == "optimize":
             return optim_cli.run(args)
-    except (ParameterError, SimulationError, CorruptFileError) as err:
+    except (ParameterError, SimulationError, SteadyStateError, CorruptFileError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)
         return 2
     except OSError as err:  # unwritable or full output directory, missing input file, ...

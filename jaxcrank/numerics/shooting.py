@@ -1,0 +1,243 @@
+"""Shooting on the Poincare map: the one-revolution map and its Jacobian by forward
+mode, Newton's method on the dynamic subspace, the tangent-growth revolution and the
+batch means of long-run statistics. The building blocks of
+:func:`jaxcrank.numerics.steady.steady_state` (see its module for the method).
+
+States here are the scaled states of :func:`jaxcrank.physics.model.state_scales`;
+``z`` is a state without its two work entries (they never feed back), the works
+restart at zero every map.
+"""
+
+from __future__ import annotations
+
+import math
+
+import diffrax
+import equinox as eqx
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..physics import model
+from ..physics.params import Mechanism, ParameterError
+from .solve import Simulation, SolveOptions, make_solver, simulate
+
+#: the solve settings of :func:`steady_state`: tight tolerances keep the noise of the
+#: adaptive steps in the one-revolution map (about 100 x rtol in scaled units) far below
+#: ``newton_tol``
+STEADY_DEFAULTS = SolveOptions(rtol=1e-10, atol=1e-10, max_steps=2_000_000)
+
+
+class RESULTS(eqxi.Enumeration):
+    """Outcome of :func:`steady_state` (``SteadyState.result``); the message says what to change."""
+
+    successful = ""
+    settle_max_steps = (
+        "a revolution used all options.max_steps solver steps: raise options.max_steps, or loosen "
+        "options.rtol/atol (the section is then noisier: raise newton_tol with them)"
+    )
+    solve_failed = (
+        "a solve failed or produced non-finite values: check the contact parameters, or try "
+        "options.solver='kvaerno5' or tighter options.rtol/atol"
+    )
+    newton_not_converged = (
+        "Newton shooting did not reach newton_tol within max_newton iterations: raise max_newton or "
+        "settle_revolutions (a closer start), or raise newton_tol above the map's noise (about 100 x options.rtol)"
+    )
+    newton_diverged = (
+        "Newton shooting diverged (the residual grew or became non-finite): raise settle_revolutions so "
+        "the settle ends closer to the orbit, or lower recurrence_tol so that only a clear recurrence is shot"
+    )
+
+
+def section_times(mech, revolutions):
+    return jnp.arange(revolutions + 1, dtype=float) * mech.period
+
+
+def dynamic_size(mech):
+    return 2 * model.n_dof(mech) + len(model.clearance_joints(mech))
+
+
+def full(z):
+    return jnp.concatenate([z, jnp.zeros(2, dtype=z.dtype)])
+
+
+@eqx.filter_jit
+def one_map(mech, z, k, options):
+    """Phi^k on the dynamic entries z (works start at zero): (z_end, result code, steps)."""
+    sim = simulate(
+        mech,
+        ts=jnp.stack([0.0, k * mech.period]),
+        y0=full(z),
+        options=options,
+        throw=False,
+        adjoint=diffrax.ForwardMode(),
+    )
+    return sim.ys[-1, : z.shape[0]], sim.result, sim.num_steps
+
+
+@eqx.filter_jit
+def map_and_jacobian(mech, z, k, options):
+    """(Phi^k(z), dPhi^k/dz, result) by forward mode."""
+
+    def f(z_):
+        out, result, _ = one_map(mech, z_, k, options)
+        return out, (out, result)
+
+    jac, (out, result) = jax.jacfwd(f, has_aux=True)(z)
+    return out, jac, result
+
+
+def period_solve(
+    mech: Mechanism,
+    y0: Float[Array, " state"],
+    k: int = 1,
+    *,
+    options: SolveOptions = STEADY_DEFAULTS,
+    samples_per_revolution: int = 3600,
+    adjoint=None,
+) -> Simulation:
+    """k revolutions from the scaled state ``y0`` at t = 0 with the headline metrics
+    tracked over t in (0, k T] (:mod:`jaxcrank.numerics.tracking`) and the state stored
+    at ``samples_per_revolution`` equal crank-angle steps per revolution (default 0.1
+    deg, as ``jaxcrank simulate``). ``throw=False``: inspect ``.ok``. Forward mode
+    (``adjoint`` defaults to ``diffrax.ForwardMode()``)."""
+    ts = jnp.linspace(0.0, k * mech.period, k * samples_per_revolution + 1)
+    adjoint = diffrax.ForwardMode() if adjoint is None else adjoint
+    return simulate(
+        mech, ts=ts, y0=y0, options=options, solver=lax_solver(options), metrics_start=0.0, throw=False, adjoint=adjoint
+    )
+
+
+def lax_solver(options):
+    """The solver of ``options`` with its Runge-Kutta stages in a plain ``lax`` loop:
+    ``ForwardMode`` sets that on the solver it sees, but the metrics-tracking wrapper
+    hides the solver from it, and the checkpointed default loop has no forward mode."""
+    solver = make_solver(options.solver)
+    if hasattr(solver, "scan_kind"):
+        solver = eqx.tree_at(lambda s: s.scan_kind, solver, "lax", is_leaf=lambda x: x is None)
+    return solver
+
+
+@eqx.filter_jit
+def revolution_with_tangent(mech, z, v, options, samples):
+    """One revolution from z (works zero) and the tangent pushed along: (z_end, v_end,
+    metrics over the revolution, result)."""
+
+    def f(z_):
+        sim = period_solve(mech, full(z_), 1, options=options, samples_per_revolution=samples)
+        return sim.ys[-1, : z_.shape[0]], (sim.metrics, sim.result)
+
+    out, tangent, (metrics_, result) = jax.jvp(f, (z,), (v,), has_aux=True)
+    return out, tangent, metrics_, result
+
+
+def failure(result):
+    if result == diffrax.RESULTS.max_steps_reached:
+        return RESULTS.settle_max_steps
+    return RESULTS.solve_failed
+
+
+def idle(jac, tol=1e-9):
+    """Memory entries whose row of M is a unit row (frozen over the map)."""
+    m = jac.shape[0]
+    eye = np.eye(m)
+    return np.max(np.abs(np.asarray(jac) - eye), axis=1) <= tol
+
+
+def newton_matrix(jac, active):
+    """I - M on the active entries, the identity on the others."""
+    act = jnp.asarray(active)
+    a = jnp.eye(jac.shape[0]) - jac
+    both = act[:, None] & act[None, :]
+    return jnp.where(both, a, jnp.eye(jac.shape[0]))
+
+
+def multipliers(jac, active):
+    idx = np.flatnonzero(active)
+    ev = np.linalg.eigvals(np.asarray(jac)[np.ix_(idx, idx)])
+    return ev[np.argsort(-np.abs(ev), kind="stable")]
+
+
+def shoot(mech, z, k, active, options, newton_tol, max_newton):
+    """Newton on Phi^k(z) = z, from z. ``active``: the dynamic subspace (None: the
+    entries whose row of M at the first iterate is not a unit row, plus s and s').
+    Returns (z, M at z, active, residual, iterations, RESULTS item)."""
+    best = None
+    for it in range(max_newton + 1):
+        out, jac, result = map_and_jacobian(mech, z, k, options)
+        if result != diffrax.RESULTS.successful:
+            return z, jac, active, jnp.asarray(np.inf), it, failure(result)
+        if active is None:
+            active = ~idle(jac) | (np.arange(z.shape[0]) < 2 * model.n_dof(mech))
+        r = jnp.where(jnp.asarray(active), out - z, 0.0)
+        res = float(jnp.max(jnp.abs(r)))
+        if not math.isfinite(res) or (best is not None and res > 1e3 * best) or res > 1e3:
+            res = res if math.isfinite(res) else float(np.finfo(float).max)
+            return z, jac, active, jnp.asarray(res), it, RESULTS.newton_diverged
+        best = res if best is None else min(best, res)
+        if res <= newton_tol:
+            return z, jac, active, jnp.asarray(res), it, RESULTS.successful
+        if it == max_newton:
+            return z, jac, active, jnp.asarray(res), it, RESULTS.newton_not_converged
+        z = z + jnp.linalg.solve(newton_matrix(jac, active), r)
+    raise AssertionError("unreachable")
+
+
+def batch_means(values: np.ndarray, batch: int, rms: bool) -> dict:
+    """Long-run value of a per-revolution metric with a 95 % confidence interval from
+    batch means (Student t over ``len(values) // batch`` batches of ``batch``
+    consecutive revolutions, the first revolutions dropped to fill whole batches).
+
+    ``rms``: the values are per-revolution RMS values, combined as mean squares (the
+    long-run RMS is ``sqrt(mean of squares)``; the interval is the square root of the
+    mean square's). Otherwise the mean of the values (e.g. per-revolution peaks).
+    Returns ``{"value", "ci95_low", "ci95_high"}`` in the metric's unit. Needs at least
+    two batches."""
+    from scipy import stats
+
+    values = np.asarray(values, dtype=float)
+    n_batches = values.size // batch
+    if n_batches < 2:
+        raise ParameterError(f"batch means need at least 2 batches of {batch} revolutions, got {values.size}")
+    x = values[values.size - n_batches * batch :] ** (2 if rms else 1)
+    means = x.reshape(n_batches, batch).mean(axis=1)
+    mean = float(means.mean())
+    half = float(stats.t.ppf(0.975, n_batches - 1) * means.std(ddof=1) / math.sqrt(n_batches))
+    if rms:
+        return {
+            "value": math.sqrt(mean),
+            "ci95_low": math.sqrt(max(mean - half, 0.0)),
+            "ci95_high": math.sqrt(mean + half),
+        }
+    return {"value": mean, "ci95_low": mean - half, "ci95_high": mean + half}
+
+
+def not_periodic(mech, z, options, statistics_revolutions, batch_revolutions, samples, counts):
+    """Finite-time multipliers at z, Lyapunov exponent and long-run statistics.
+    Returns (jac, result, lyapunov 1/s, statistics, last revolution's Simulation, z_end)."""
+    _, jac, result = map_and_jacobian(mech, z, 1, options)
+    counts["shooting"] += 1
+    if result != diffrax.RESULTS.successful:
+        return jac, failure(result), None, None, None
+    v = jnp.ones_like(z) / math.sqrt(z.shape[0])
+    logs, per_rev = [], []
+    for _ in range(statistics_revolutions):
+        z, v, metrics_, result = revolution_with_tangent(mech, z, v, options, samples)
+        counts["statistics"] += 1
+        norm = float(jnp.linalg.norm(v))
+        if result != diffrax.RESULTS.successful or not (math.isfinite(norm) and norm > 0):
+            return jac, failure(result), None, None, None
+        logs.append(math.log(norm))
+        v = v / norm
+        per_rev.append({k: float(val) for k, val in metrics_.items() if k != "window_start_s"})
+    lyapunov = float(np.mean(logs)) / float(mech.period)
+    from ..analysis.metrics import METRICS
+
+    statistics = {
+        key: batch_means([r[key] for r in per_rev], batch_revolutions, METRICS.get(key, ("max",))[0] == "rms")
+        for key in per_rev[0]
+    }
+    return jac, RESULTS.successful, lyapunov, statistics, z

@@ -1,0 +1,430 @@
+"""The steady state: the motion the mechanism settles into, its period and its stability.
+
+The equations of motion are periodic in time with the crank period T = 2 pi / omega
+(the crank turns at constant speed), so the state sampled once per revolution, at
+t = n T (the crank back at its initial angle), is a **Poincare section**, and one
+revolution is a map ``Phi: y(nT) -> y((n + 1) T)`` of the scaled state
+(:func:`jaxcrank.physics.model.state_scales`). :func:`steady_state`
+
+1. **settles**: simulates ``settle_revolutions`` revolutions from pins-centred rest
+   (or from ``warm_start``) and keeps the section points;
+2. **detects a period**: the smallest k <= ``max_period`` whose section points recur,
+   ``max |y_N - y_{N-k}| <= recurrence_tol``;
+3. **shoots**: Newton's method on ``Phi^k(y) = y``, with the monodromy matrix
+   ``M = dPhi^k/dy`` from forward-mode autodiff through the solve
+   (``diffrax.ForwardMode``), until ``max |Phi^k(y) - y| <= newton_tol``;
+4. **classifies**: ``periodic`` with ``period_revolutions = k`` when the orbit is
+   found and attracting (every Floquet multiplier, an eigenvalue of M, inside the unit
+   circle), ``not periodic`` otherwise. Not periodic, it measures the largest
+   finite-time Lyapunov exponent from the growth of a tangent vector (renormalised each
+   revolution) and the long-run statistics of the metrics (batch means over
+   revolutions, 95 % confidence intervals) over ``statistics_revolutions``.
+
+**Neutral directions.** Two kinds of state entries are left out of the Newton and
+Floquet problem, so that ``I - M`` is invertible on what is left:
+
+- the driver and dissipated work: accumulated energy flows that never feed back;
+  every section state has them at zero (the orbit's works are then the energy per
+  period);
+- an approach-speed memory that is *idle*: while a pin stays in contact the memory
+  holds the approach speed of the last impact, frozen (its row of M is a unit row, its
+  multiplier exactly 1). The orbit is then one of a family parametrised by that value,
+  and the solver holds it at the value the settle reached (the value the motion from
+  rest selects). A memory that moves over a revolution (the pin separates and hits
+  again) is an ordinary dynamic entry and is solved for.
+
+The Newton and Floquet problem lives on the **dynamic subspace**: the coordinates s
+and rates s' of :class:`jaxcrank.physics.model.State`, plus the memories that are not
+idle (``SteadyState.active``).
+
+**Exact gradient.** :func:`orbit_start` returns the section state y*(mech) with a
+``jax.custom_jvp`` (implicit function theorem at the fixed point):
+``dy*/dp = (I - M)^-1 dPhi^k/dp`` on the dynamic subspace (idle memories and works
+held), so ``jax.jvp`` / ``jax.jacfwd`` of any function of the steady state are exact.
+Forward mode only (the tangent of Phi goes through ``diffrax.ForwardMode``): design
+problems have few variables. :func:`steady_value_and_grad` wraps it for a functional
+of one period of the orbit. The building blocks (maps, Newton, batch means) live in
+:mod:`jaxcrank.numerics.shooting`.
+
+Example::
+
+    steady = jaxcrank.steady_state(mech)            # settle, shoot, classify
+    steady.regime, steady.multiplier_moduli         # "periodic", |mu| largest first
+    steady.metrics["rms_transmission_angle_error_deg"]
+    value, grad = steady_value_and_grad(
+        lambda sim: sim.metrics["rms_transmission_angle_error_deg"], build, params, steady
+    )
+    nxt = jaxcrank.steady_state(build(params2), warm_start=steady)   # a few revolutions
+"""
+
+from __future__ import annotations
+
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Complex, Float
+
+from ..physics import model
+from ..physics.params import Mechanism, ParameterError
+from . import shooting
+from .shooting import RESULTS, STEADY_DEFAULTS, period_solve
+from .solve import Simulation, SolveOptions, simulate
+
+
+class SteadyStateError(RuntimeError):
+    """:func:`steady_state` could not finish; the message says what to change."""
+
+
+class SteadyState(eqx.Module):
+    """The result of :func:`steady_state`. Scaled states as in
+    :func:`jaxcrank.physics.model.state_scales` (lengths in clearances).
+
+    Attributes:
+        mechanism: the mechanism.
+        result: :class:`RESULTS` item (``RESULTS.successful`` unless the solver failed).
+        regime: ``"periodic"`` or ``"not periodic"``.
+        period_revolutions: k, the period in crank revolutions (0 when not periodic).
+        residual: ``max |Phi^k(y*) - y*|`` over the dynamic subspace, scaled units (the
+            recurrence distance of the last section points when not periodic).
+        newton_iterations: Newton steps taken.
+        section_state: y*, the scaled state at t = 0 (crank at its initial angle) that
+            starts the orbit; works zero. Not periodic: the last section point.
+        monodromy: M = dPhi^k/dy at y* on the state entries before the works, shape
+            (m, m), m = 2 n_dof + joints (not periodic: the one-revolution map's).
+        active: which of those m entries form the dynamic subspace (bool, (m,)).
+        floquet_multipliers: eigenvalues of M on the dynamic subspace, complex, largest
+            modulus first (per period of k revolutions; not periodic: finite-time, per
+            revolution, at the last section point).
+        neutral: names of the entries left out (idle memories, works).
+        section_points: the section points of the settle, scaled, (settle + 1, state).
+        orbit: one period of the orbit from y* (ts, ys, and its tracked metrics; not
+            periodic: the last revolution of the statistics run).
+        metrics: the headline metrics over one period (``orbit.metrics``; units in the
+            names). Not periodic: the long-run statistics' point values.
+        lyapunov_exponent_per_s: largest Lyapunov exponent, 1/s: periodic,
+            ``ln max|mu| / (k T)`` from the multipliers; not periodic, the finite-time
+            estimate from tangent growth.
+        statistics: not periodic: metric -> ``{"value", "ci95_low", "ci95_high"}`` over
+            the statistics revolutions (units in the names); ``None`` when periodic.
+        revolutions: solve counts in revolutions: ``settle``, ``shooting`` (with
+            tangents), ``orbit``, ``statistics`` (with a tangent).
+        options, samples_per_revolution: the solve settings and sampling used.
+    """
+
+    mechanism: Mechanism
+    result: RESULTS
+    regime: str = eqx.field(static=True)
+    period_revolutions: int = eqx.field(static=True)
+    residual: Float[Array, ""]
+    newton_iterations: int = eqx.field(static=True)
+    section_state: Float[Array, " state"]
+    monodromy: Float[Array, "m m"]
+    active: Bool[np.ndarray, " m"] = eqx.field(static=True, converter=lambda a: tuple(bool(v) for v in a))
+    floquet_multipliers: Complex[Array, " d"]
+    neutral: tuple = eqx.field(static=True)
+    section_points: Float[Array, "revs state"]
+    orbit: Simulation | None
+    metrics: dict
+    lyapunov_exponent_per_s: Float[Array, ""]
+    statistics: dict | None
+    revolutions: dict = eqx.field(static=True)
+    options: SolveOptions = eqx.field(static=True)
+    samples_per_revolution: int = eqx.field(static=True)
+
+    @property
+    def ok(self) -> bool:
+        return bool(self.result == RESULTS.successful)
+
+    @property
+    def periodic(self) -> bool:
+        return self.ok and self.regime == "periodic"
+
+    @property
+    def multiplier_moduli(self) -> np.ndarray:
+        """|Floquet multipliers|, largest first."""
+        return np.abs(np.asarray(self.floquet_multipliers))
+
+
+def _neutral_names(mech, active):
+    n = 2 * model.n_dof(mech)
+    names = [f"approach_memory_{j}" for i, j in enumerate(model.clearance_joints(mech)) if not active[n + i]]
+    return tuple(names) + ("driver_work", "dissipated_work")
+
+
+def _warm_state(mech, warm):
+    """A scaled section state for ``mech`` from a previous :class:`SteadyState` (its
+    pin-in-bearing state carried over physically) or a scaled state array."""
+    if isinstance(warm, SteadyState):
+        old, y = warm.mechanism, warm.section_state
+        if model.clearance_joints(old) == model.clearance_joints(mech) == ("B", "C"):
+            d, dd = model.eccentricities(old, 0.0, y)
+            rest = model.auxiliary(old, y)
+            y = model.state_from_eccentricities(mech, 0.0, d, dd, rest)
+    else:
+        y = jnp.asarray(warm, dtype=float)
+    if y.shape != (model.state_size(mech),):
+        raise ParameterError(f"warm_start has state shape {y.shape}; this mechanism's is ({model.state_size(mech)},)")
+    return y.at[-2:].set(0.0)
+
+
+def _check_arguments(
+    settle_revolutions,
+    max_period,
+    recurrence_tol,
+    newton_tol,
+    max_newton,
+    statistics_revolutions,
+    batch_revolutions,
+    samples_per_revolution,
+):
+    for name, value, low in (
+        ("settle_revolutions", settle_revolutions, 1),
+        ("max_period", max_period, 1),
+        ("max_newton", max_newton, 0),
+        ("batch_revolutions", batch_revolutions, 1),
+        ("samples_per_revolution", samples_per_revolution, 2),
+    ):
+        if not (isinstance(value, (int, np.integer)) and value >= low):
+            raise ParameterError(f"{name} = {value!r} must be an integer >= {low}")
+    if not (isinstance(statistics_revolutions, (int, np.integer)) and statistics_revolutions >= 2 * batch_revolutions):
+        raise ParameterError(
+            f"statistics_revolutions = {statistics_revolutions!r} must be an integer >= 2 * batch_revolutions "
+            f"= {2 * batch_revolutions} (two batches at least)"
+        )
+    for name, value in (("recurrence_tol", recurrence_tol), ("newton_tol", newton_tol)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ParameterError(f"{name} = {value!r} must be a finite number > 0 (scaled units: clearances)")
+
+
+def steady_state(
+    mech: Mechanism,
+    *,
+    settle_revolutions: int = 20,
+    max_period: int = 4,
+    recurrence_tol: float = 1e-3,
+    newton_tol: float = 1e-7,
+    max_newton: int = 8,
+    warm_start=None,
+    statistics_revolutions: int = 10,
+    batch_revolutions: int = 2,
+    samples_per_revolution: int = 3600,
+    options: SolveOptions = STEADY_DEFAULTS,
+    throw: bool = True,
+) -> SteadyState:
+    """The steady state of ``mech``: its periodic orbit and stability, or, when it has no
+    attracting periodic orbit of period <= ``max_period``, its Lyapunov exponent and
+    long-run statistics (module docstring).
+
+    Args:
+        mech: the mechanism.
+        settle_revolutions: revolutions simulated from rest before shooting (>= 1).
+        max_period: the longest period looked for, revolutions (>= 1).
+        recurrence_tol: section points of the settle closer than this (max over the
+            dynamic entries, scaled units: clearances and clearance x crank speed) mark
+            a candidate period for shooting.
+        newton_tol: Newton shooting stops at ``max |Phi^k(y) - y| <= newton_tol``,
+            scaled units. Keep it above the map's noise, about 100 x ``options.rtol``.
+        max_newton: Newton iterations at most (0: only check the settle's end).
+        warm_start: a previous :class:`SteadyState` (its pin-in-bearing state is carried
+            over to ``mech`` physically; a periodic one also gives the period to shoot,
+            after one period of settle) or a scaled state at t = 0. When shooting from it
+            fails, the solver settles ``settle_revolutions`` from there and starts over.
+        statistics_revolutions: not periodic: revolutions of the Lyapunov and statistics
+            run (>= 2 batches).
+        batch_revolutions: revolutions per batch of the batch means.
+        samples_per_revolution: sample times per revolution of the orbit and of the RMS
+            metrics (default 3600: 0.1 deg of crank angle).
+        options: solve settings (:data:`STEADY_DEFAULTS`: rtol = atol = 1e-10).
+        throw: raise :class:`SteadyStateError` when the result is not
+            ``RESULTS.successful``; with ``False`` inspect ``SteadyState.result``.
+
+    Returns:
+        a :class:`SteadyState`.
+
+    Raises:
+        ParameterError: for an argument outside its range (the message names it).
+        SteadyStateError: with ``throw=True``, when a solve or the shooting failed.
+    """
+    _check_arguments(
+        settle_revolutions,
+        max_period,
+        recurrence_tol,
+        newton_tol,
+        max_newton,
+        statistics_revolutions,
+        batch_revolutions,
+        samples_per_revolution,
+    )
+    counts = {"settle": 0, "shooting": 0, "orbit": 0, "statistics": 0}
+    y0 = model.initial_state(mech) if warm_start is None else _warm_state(mech, warm_start)
+    warm_k = warm_start.period_revolutions if isinstance(warm_start, SteadyState) and warm_start.periodic else 0
+    out = _steady(
+        mech, y0, warm_k, settle_revolutions, max_period, recurrence_tol, newton_tol, max_newton,
+        statistics_revolutions, batch_revolutions, samples_per_revolution, options, counts,
+    )  # fmt: skip
+    if throw and out.result != RESULTS.successful:
+        raise SteadyStateError(
+            f"steady_state failed after {out.newton_iterations} Newton iterations (residual "
+            f"{float(out.residual):.3g} scaled units, newton_tol {newton_tol:g}): {RESULTS[out.result]}"
+        )
+    return out
+
+
+def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, max_newton, n_stats, batch, samples,
+            options, counts):  # fmt: skip
+    m = shooting.dynamic_size(mech)
+    n_settle = warm_k if warm_k else settle
+    sim = simulate(mech, ts=shooting.section_times(mech, n_settle), y0=y0, options=options, throw=False)
+    counts["settle"] += n_settle
+    section = sim.ys
+    empty = dict(
+        mechanism=mech, period_revolutions=0, newton_iterations=0, section_points=section, orbit=None, metrics={},
+        lyapunov_exponent_per_s=jnp.asarray(0.0), statistics=None, revolutions=counts,
+        monodromy=jnp.zeros((m, m)), active=np.ones(m, bool), floquet_multipliers=jnp.zeros(0, complex),
+        neutral=(), section_state=section[-1].at[-2:].set(0.0), options=options, samples_per_revolution=samples,
+    )  # fmt: skip
+    if sim.result != diffrax.RESULTS.successful or not bool(jnp.all(jnp.isfinite(section))):
+        return SteadyState(
+            result=shooting.failure(sim.result), regime="not periodic", residual=jnp.asarray(np.inf), **empty
+        )
+    z_end = section[-1, :m]
+    if warm_k:
+        candidates = [warm_k]
+    else:
+        distances = {
+            k: float(jnp.max(jnp.abs(z_end - section[-1 - k, :m]))) for k in range(1, min(max_period, n_settle) + 1)
+        }
+        candidates = [k for k, d in distances.items() if d <= recurrence_tol]
+    failure = None
+    for k in candidates:
+        z, jac, active, res, its, result = shooting.shoot(mech, z_end, k, None, options, newton_tol, max_newton)
+        counts["shooting"] += k * (its + 1)
+        if result != RESULTS.successful:
+            failure = failure or (result, res, its)
+            continue
+        mult = shooting.multipliers(jac, active)
+        if np.max(np.abs(mult), initial=0.0) >= 1.0:
+            break  # an unstable orbit: the motion does not settle onto it
+        orbit = period_solve(mech, shooting.full(z), k, options=options, samples_per_revolution=samples)
+        counts["orbit"] += k
+        if not orbit.ok:
+            return SteadyState(result=shooting.failure(orbit.result), regime="not periodic", residual=res, **empty)
+        lead = float(np.max(np.abs(mult), initial=0.0))
+        fields = dict(empty, period_revolutions=k, newton_iterations=its, orbit=orbit, monodromy=jac, active=active)
+        fields.update(
+            metrics={key: v for key, v in orbit.metrics.items() if key != "window_start_s"},
+            floquet_multipliers=jnp.asarray(mult),
+            neutral=_neutral_names(mech, active),
+            section_state=shooting.full(z),
+            lyapunov_exponent_per_s=jnp.asarray(math.log(max(lead, 1e-300)) / (k * float(mech.period))),
+        )
+        return SteadyState(result=RESULTS.successful, regime="periodic", residual=res, **fields)
+    else:
+        if failure is not None:
+            if warm_k:  # the warm start was too far: settle from there and start over
+                return _steady(mech, section[-1], 0, settle, max_period, recurrence_tol, newton_tol, max_newton,
+                               n_stats, batch, samples, options, counts)  # fmt: skip
+            result, res, its = failure
+            return SteadyState(result=result, regime="not periodic", residual=res, **dict(empty, newton_iterations=its))
+    recurrence = float(jnp.max(jnp.abs(z_end - section[-2, :m])))
+    jac, result, lyapunov, statistics, z_last = shooting.not_periodic(
+        mech, z_end, options, n_stats, batch, samples, counts
+    )
+    if result != RESULTS.successful:
+        return SteadyState(result=result, regime="not periodic", residual=jnp.asarray(recurrence), **empty)
+    active = ~shooting.idle(jac) | (np.arange(m) < 2 * model.n_dof(mech))
+    orbit = period_solve(mech, shooting.full(z_last), 1, options=options, samples_per_revolution=samples)
+    counts["orbit"] += 1
+    fields = dict(empty, monodromy=jac, active=active, orbit=orbit if orbit.ok else None, statistics=statistics)
+    fields.update(
+        metrics={key: s["value"] for key, s in statistics.items()},
+        floquet_multipliers=jnp.asarray(shooting.multipliers(jac, active)),
+        neutral=_neutral_names(mech, active),
+        lyapunov_exponent_per_s=jnp.asarray(lyapunov),
+    )
+    return SteadyState(result=RESULTS.successful, regime="not periodic", residual=jnp.asarray(recurrence), **fields)
+
+
+@eqx.filter_custom_jvp
+def _fixed_point(mech, z_star, jac, *, k, active, options):
+    return jax.lax.stop_gradient(z_star)
+
+
+@_fixed_point.def_jvp
+def _fixed_point_jvp(primals, tangents, *, k, active, options):
+    mech, z_star, jac = primals
+    z_star, jac = jax.lax.stop_gradient(z_star), jax.lax.stop_gradient(jac)
+    if tangents[0] is None:
+        return z_star, jnp.zeros_like(z_star)
+    _, dphi = eqx.filter_jvp(lambda m_: shooting.one_map(m_, z_star, k, options)[0], (mech,), (tangents[0],))
+    dphi = jnp.where(jnp.asarray(active), dphi, 0.0)
+    return z_star, jnp.linalg.solve(shooting.newton_matrix(jac, active), dphi)
+
+
+def orbit_start(mech: Mechanism, steady: SteadyState) -> Float[Array, " state"]:
+    """The orbit's section state y*(mech), scaled, works zero, differentiable in ``mech``
+    by the implicit function theorem: under ``jax.jvp``/``jax.jacfwd`` its tangent is
+    ``(I - M)^-1 dPhi^k/dp . dp`` on the dynamic subspace (idle memories and works held),
+    with M = ``steady.monodromy`` at y*. The value is ``steady.section_state``.
+
+    Args:
+        mech: the mechanism of ``steady`` (possibly built from traced design variables).
+        steady: a periodic :class:`SteadyState` of that mechanism.
+
+    Raises:
+        SteadyStateError: when ``steady`` is not periodic (no orbit to differentiate).
+
+    Forward mode only: reverse mode (``jax.grad``) raises inside JAX."""
+    if not steady.periodic:
+        raise SteadyStateError(
+            f"orbit_start needs a periodic steady state; this one is {steady.regime!r} "
+            f"({RESULTS[steady.result] or 'successful'}): its long-run statistics carry no exact gradient"
+        )
+    m = shooting.dynamic_size(mech)
+    z = _fixed_point(
+        mech,
+        steady.section_state[:m],
+        steady.monodromy,
+        k=steady.period_revolutions,
+        active=steady.active,
+        options=steady.options,
+    )
+    return shooting.full(z)
+
+
+def steady_value_and_grad(objective, build, params, steady: SteadyState):
+    """Value and exact gradient of a functional of one period of the periodic orbit.
+
+    Args:
+        objective: ``Simulation -> scalar``; it gets :func:`period_solve` of one period
+            from :func:`orbit_start` (``.ts``, ``.ys``, tracked ``.metrics``, e.g.
+            ``lambda sim: sim.metrics["rms_transmission_angle_error_deg"]``).
+        build: ``params -> Mechanism``, traceable (e.g. a design problem's ``mechanism``).
+        params: the design variables (an array or pytree of arrays).
+        steady: the periodic :class:`SteadyState` of ``build(params)``.
+
+    Returns:
+        ``(value, gradient)``, the gradient with the structure of ``params``
+        (``jax.jacfwd``: one tangent per variable).
+
+    Raises:
+        SteadyStateError: when ``steady`` is not periodic."""
+
+    def f(p):
+        mech = build(p)
+        sim = period_solve(
+            mech,
+            orbit_start(mech, steady),
+            steady.period_revolutions,
+            options=steady.options,
+            samples_per_revolution=steady.samples_per_revolution,
+        )
+        value = objective(sim)
+        return value, value
+
+    gradient, value = jax.jacfwd(f, has_aux=True)(params)
+    return value, gradient

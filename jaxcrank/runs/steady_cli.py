@@ -1,0 +1,199 @@
+"""``jaxcrank steady [--config FILE] [--set KEY=VALUE ...] --out DIR``: the steady state
+of a mechanism (:func:`jaxcrank.numerics.steady.steady_state`) with its summary, one
+period of the orbit, its figures and a Poincare-section plot."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from pathlib import Path
+
+from ..numerics.shooting import STEADY_DEFAULTS
+from ..numerics.solve import SOLVERS
+from ..physics.params import ParameterError, paper
+from . import config
+
+
+def add_parser(sub):
+    p = sub.add_parser(
+        "steady",
+        help="find the steady state: periodic orbit and its Floquet multipliers, or chaos and long-run statistics",
+        description="Settle from rest, then shoot for the periodic orbit of the once-per-revolution Poincare map. "
+        "Writes summary.json (regime, period_revolutions, floquet_multipliers, the steady-state metrics), "
+        "orbit.csv (one period), config.toml, figures/ and poincare_section.png into --out.",
+    )
+    p.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
+    p.add_argument("--out", type=Path, default=Path("runs/steady"), help="run directory (default: runs/steady)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a parameter, e.g. --set slider_mass=2.0 (repeatable)",
+    )
+    p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
+    p.add_argument("--settle-revolutions", type=int, default=20, help="revolutions from rest before shooting (20)")
+    p.add_argument("--max-period", type=int, default=4, help="longest period looked for, revolutions (4)")
+    p.add_argument("--newton-tol", type=float, default=1e-7, help="shooting tolerance, scaled units (1e-7)")
+    p.add_argument(
+        "--statistics-revolutions", type=int, default=10, help="not periodic: revolutions of the statistics run (10)"
+    )
+    p.add_argument("--batch-revolutions", type=int, default=2, help="revolutions per batch of the batch means (2)")
+    p.add_argument(
+        "--samples-per-revolution", type=int, default=3600, help="samples per revolution of the orbit (3600)"
+    )
+    p.add_argument("--solver", choices=sorted(SOLVERS), default=STEADY_DEFAULTS.solver, help="ODE solver")
+    p.add_argument("--rtol", type=float, default=STEADY_DEFAULTS.rtol, help="relative tolerance (1e-10)")
+    p.add_argument("--atol", type=float, default=STEADY_DEFAULTS.atol, help="absolute tolerance (1e-10)")
+    p.add_argument("--max-steps", type=int, default=STEADY_DEFAULTS.max_steps, help="step budget per solve (2000000)")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    return p
+
+
+def _section_eccentricities(steady):
+    """Pin eccentricities at the settle's section points and at y*, in clearances:
+    joint -> (points (n, 2), orbit point (2,))."""
+    import numpy as np
+
+    from ..physics import model
+
+    mech = steady.mechanism
+    out = {}
+    for i, joint in enumerate(model.clearance_joints(mech)):
+        c = float(getattr(mech, f"joint_{joint}").clearance)
+        pts = []
+        for n, y in enumerate(np.asarray(steady.section_points)):
+            d, _ = model.joint_eccentricities(mech, n * float(mech.period), y)
+            pts.append(np.asarray(d[i]) / c)
+        d, _ = model.joint_eccentricities(mech, 0.0, steady.section_state)
+        out[joint] = (np.array(pts), np.asarray(d[i]) / c)
+    return out
+
+
+def poincare_plot(steady, path: Path) -> Path:
+    """The Poincare section (crank at its initial angle, once per revolution): pin
+    eccentricity in each clearance bearing, in units of its clearance, at the settle's
+    section points (coloured by revolution) and at the orbit's start state."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    ecc = _section_eccentricities(steady)
+    fig, axes = plt.subplots(1, max(1, len(ecc)), figsize=(5 * max(1, len(ecc)), 4.6), squeeze=False)
+    for ax, (joint, (pts, star)) in zip(axes[0], ecc.items()):
+        theta = np.linspace(0, 2 * np.pi, 200)
+        ax.plot(np.cos(theta), np.sin(theta), color="0.6", lw=0.8, label="clearance circle")
+        sc = ax.scatter(pts[:, 0], pts[:, 1], c=np.arange(len(pts)), cmap="viridis", s=14, label="settle")
+        label = "orbit start y*" if steady.regime == "periodic" else "last section point"
+        ax.plot(star[0], star[1], "r*", ms=12, label=label)
+        ax.set_aspect("equal")
+        ax.set_xlabel(f"e_x at {joint} / clearance (1)")
+        ax.set_ylabel(f"e_y at {joint} / clearance (1)")
+        ax.set_title(f"joint {joint}")
+        ax.legend(fontsize=7, loc="lower left")
+        fig.colorbar(sc, ax=ax, label="revolution")
+    k = steady.period_revolutions
+    fig.suptitle(f"Poincare section: {steady.regime}" + (f", period {k} revolution(s)" if k else ""))
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def summary(steady, wall: float, args) -> dict:
+    """summary.json's content (units in key names; scaled units are clearances)."""
+    import numpy as np
+
+    mult = np.asarray(steady.floquet_multipliers)
+    return {
+        "regime": steady.regime,
+        "period_revolutions": steady.period_revolutions,
+        "floquet_multipliers": [float(v) for v in np.abs(mult)],
+        "floquet_multipliers_complex": [[float(v.real), float(v.imag)] for v in mult],
+        "floquet_multipliers_note": (
+            "per period, on the dynamic subspace, largest modulus first"
+            if steady.regime == "periodic"
+            else "finite-time: the one-revolution map's at the last section point"
+        ),
+        "neutral_directions": list(steady.neutral),
+        "newton_residual_scaled": float(steady.residual),
+        "newton_iterations": steady.newton_iterations,
+        "lyapunov_exponent_per_s": float(steady.lyapunov_exponent_per_s),
+        "metrics_window": (
+            f"one period of the orbit ({steady.period_revolutions} revolution(s))"
+            if steady.regime == "periodic"
+            else f"long-run statistics over {args.statistics_revolutions} revolutions (batch means, 95 % CI)"
+        ),
+        "metrics": {k: float(v) for k, v in steady.metrics.items()},
+        "statistics": steady.statistics,
+        "revolutions_solved": dict(steady.revolutions),
+        "solver": {"name": args.solver, "rtol": args.rtol, "atol": args.atol, "max_steps": args.max_steps},
+        "wall_time_s": wall,
+        "wall_time_includes": "compilation and every solve",
+    }
+
+
+def run(args) -> int:
+    from ..analysis import outputs
+    from ..numerics.steady import steady_state
+    from . import plots
+
+    mech = config.load(args.config) if args.config else paper()
+    overrides = list(args.overrides)
+    if args.rpm is not None:
+        overrides.append(f"crank_speed={2.0 * math.pi * args.rpm / 60.0!r}")
+    mech = config.apply_overrides(mech, overrides)
+    if not (args.newton_tol > 0):
+        raise ParameterError(f"--newton-tol = {args.newton_tol:g} must be > 0")
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    config.save(mech, out / "config.toml")
+    options = STEADY_DEFAULTS.replace(solver=args.solver, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+    start = time.perf_counter()
+    steady = steady_state(
+        mech,
+        settle_revolutions=args.settle_revolutions,
+        max_period=args.max_period,
+        newton_tol=args.newton_tol,
+        statistics_revolutions=args.statistics_revolutions,
+        batch_revolutions=args.batch_revolutions,
+        samples_per_revolution=args.samples_per_revolution,
+        options=options,
+    )
+    wall = time.perf_counter() - start
+    data = summary(steady, wall, args)
+    (out / "summary.json").write_text(json.dumps(data, indent=2))
+    written = ["config.toml", "summary.json"]
+    if steady.orbit is not None:
+        cols = outputs.trajectory(steady.orbit)
+        with open(out / "orbit.csv", "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(list(outputs.COLUMNS))
+            for row in zip(*(cols[k] for k in outputs.COLUMNS)):
+                writer.writerow([f"{v:.10g}" for v in row])
+        written.append("orbit.csv")
+        if not args.no_figures:
+            clearances = {
+                j: 0.0 if getattr(mech, f"joint_{j}").ideal else float(getattr(mech, f"joint_{j}").clearance)
+                for j in "BC"
+            }
+            plots.save_figures(cols, clearances, out / "figures")
+            written.append("figures/")
+    if not args.no_figures:
+        poincare_plot(steady, out / "poincare_section.png")
+        written.append("poincare_section.png")
+    mods = ", ".join(f"{v:.3g}" for v in data["floquet_multipliers"][:3])
+    print(f"wrote {out}/ ({', '.join(written)})")
+    print(
+        f"  {steady.regime}"
+        + (f", period {steady.period_revolutions} revolution(s)" if steady.period_revolutions else "")
+        + f"; |Floquet multipliers| {mods}; Lyapunov exponent {data['lyapunov_exponent_per_s']:.3g} 1/s; "
+        f"{wall:.1f} s"
+    )
+    print(f"  RMS transmission-angle error = {data['metrics']['rms_transmission_angle_error_deg']:.4f} deg")
+    return 0

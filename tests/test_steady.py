@@ -1,0 +1,191 @@
+"""The steady-state solver against ground truth it does not compute itself: finite
+differences of the one-revolution map, a long plain simulation from rest, and the
+named failures. The periodic case is the best design CMA-ES found for the nine-variable
+design problem (bench/results/design_study.json): its pins stay in contact, and its
+orbit attracts within a few revolutions."""
+
+import json
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxcrank as jc
+from jaxcrank.numerics import shooting
+from jaxcrank.numerics.steady import RESULTS, SteadyStateError, steady_state, steady_value_and_grad
+from jaxcrank.physics import model
+
+ROOT = Path(__file__).resolve().parent.parent
+KEY = "rms_transmission_angle_error_deg"
+
+
+def _design_problem():
+    from optim.design import design_problem
+
+    return design_problem()
+
+
+def _unit_design(name="cma_design_SI"):
+    study = json.loads((ROOT / "bench" / "results" / "design_study.json").read_text())
+    prob = _design_problem()
+    lo, hi = np.array(prob.lower), np.array(prob.upper)
+    return (np.asarray(study["optimum"][name]) - lo) / (hi - lo)
+
+
+def _build(u):
+    prob = _design_problem()
+    lo, hi = jnp.asarray(prob.lower), jnp.asarray(prob.upper)
+    return prob.mechanism(lo + u * (hi - lo))
+
+
+@pytest.fixture(scope="module")
+def periodic():
+    mech = _build(jnp.asarray(_unit_design()))
+    return mech, steady_state(mech)
+
+
+def _plain_map(mech, y, tol=1e-10):
+    """One revolution by plain simulate (no shooting code), works zeroed at the start."""
+    sim = jc.simulate(mech, ts=jnp.array([0.0, float(mech.period)]), y0=y.at[-2:].set(0.0), rtol=tol, atol=tol)
+    return sim.ys[-1]
+
+
+@pytest.mark.slow
+def test_periodic_orbit_against_finite_differences_and_long_run(periodic):
+    mech, steady = periodic
+    assert steady.ok and steady.regime == "periodic" and steady.period_revolutions == 1
+    assert float(steady.residual) <= 1e-7
+    mods = steady.multiplier_moduli
+    assert mods[0] < 1.0 and np.all(np.diff(mods) <= 0.0)
+    assert set(steady.neutral) == {"approach_memory_B", "approach_memory_C", "driver_work", "dissipated_work"}
+    # monodromy against central differences of the one-revolution map (step 1e-3 clearances;
+    # the map's noise at rtol = 1e-10 is about 1e-8, so the differences carry 1e-5 of it)
+    y = steady.section_state
+    n = 2 * model.n_dof(mech)
+    h = 1e-3
+    fd = np.stack(
+        [
+            (np.asarray(_plain_map(mech, y.at[j].add(h))) - np.asarray(_plain_map(mech, y.at[j].add(-h))))[:n] / (2 * h)
+            for j in range(n)
+        ],
+        axis=1,
+    )
+    ad = np.asarray(steady.monodromy)[:n, :n]
+    assert np.max(np.abs(fd - ad)) <= 1e-3 * max(np.max(np.abs(ad)), 1e-3) + 1e-5
+    fd_mods = np.sort(np.abs(np.linalg.eigvals(fd)))[::-1]
+    assert abs(fd_mods[0] - mods[0]) <= 0.05 * mods[0]
+    # the orbit's start state against a long plain simulation from rest (30 revolutions;
+    # the leading multiplier is below 1e-2, so its section settled to rounding long before)
+    T = float(mech.period)
+    long = jc.simulate(mech, ts=jnp.arange(31) * T, rtol=1e-10, atol=1e-10, max_steps=5_000_000)
+    assert np.max(np.abs(np.asarray(long.ys[-1, :n]) - np.asarray(y[:n]))) <= 1e-6
+    # the fixed point: one more revolution returns to it
+    assert np.max(np.abs(np.asarray(_plain_map(mech, y))[:n] - np.asarray(y[:n]))) <= 1e-7
+    # the orbit's metrics against the same metrics of the long run's next revolution
+    ref = jc.simulate(
+        mech, t1=31 * T, n_samples=31 * 3600 + 1, metrics_start=30 * T, save_samples=False, rtol=1e-10, atol=1e-10
+    ).metrics
+    for key in (KEY, "rms_contact_force_B_N", "peak_contact_force_C_N"):
+        assert float(steady.metrics[key]) == pytest.approx(float(ref[key]), rel=1e-5)
+
+
+@pytest.mark.slow
+def test_warm_start_from_a_neighbour_costs_a_few_revolutions(periodic):
+    mech, steady = periodic
+    u = jnp.asarray(_unit_design()) + 0.01
+    warm = steady_state(_build(u), warm_start=steady)
+    cold_settle = steady.revolutions["settle"]
+    assert warm.periodic and float(warm.residual) <= 1e-7
+    assert sum(warm.revolutions.values()) <= 6 < cold_settle
+
+
+@pytest.mark.slow
+def test_newton_capped_gives_a_named_status_and_no_nan(periodic):
+    mech, _ = periodic
+    # Newton capped at 0 iterations on a 2-revolution settle: not converged, named
+    out = steady_state(mech, settle_revolutions=2, recurrence_tol=1e3, max_newton=0, throw=False)
+    assert out.result == RESULTS.newton_not_converged and not out.ok
+    assert np.isfinite(float(out.residual)) and float(out.residual) > 1e-7
+    with pytest.raises(SteadyStateError, match="max_newton"):
+        steady_state(mech, settle_revolutions=2, recurrence_tol=1e3, max_newton=0)
+
+
+def test_killed_settle_gives_a_named_status_and_no_nan(paper):
+    tiny = shooting.STEADY_DEFAULTS.replace(max_steps=50)
+    out = steady_state(paper, settle_revolutions=1, options=tiny, throw=False)
+    assert out.result == RESULTS.settle_max_steps and not out.ok
+    for leaf in (out.residual, out.monodromy, out.section_state, out.lyapunov_exponent_per_s):
+        assert not np.any(np.isnan(np.asarray(leaf)))
+    with pytest.raises(SteadyStateError, match="max_steps"):
+        steady_state(paper, settle_revolutions=1, options=tiny)
+
+
+def test_bad_arguments_name_the_parameter(paper):
+    mech = paper
+    with pytest.raises(jc.ParameterError, match="settle_revolutions"):
+        steady_state(mech, settle_revolutions=0)
+    with pytest.raises(jc.ParameterError, match="statistics_revolutions"):
+        steady_state(mech, statistics_revolutions=3, batch_revolutions=2)
+    with pytest.raises(jc.ParameterError, match="newton_tol"):
+        steady_state(mech, newton_tol=-1.0)
+
+
+def test_batch_means_interval():
+    rng = np.random.default_rng(0)
+    values = 2.0 + rng.normal(size=400)
+    stats = shooting.batch_means(values, 4, rms=False)
+    assert stats["ci95_low"] < 2.0 < stats["ci95_high"]
+    assert stats["value"] == pytest.approx(values.mean())
+    rms = shooting.batch_means(np.full(8, 3.0), 2, rms=True)
+    assert rms == {"value": 3.0, "ci95_low": 3.0, "ci95_high": 3.0}
+
+
+@pytest.mark.slow
+def test_paper_preset_is_not_periodic_with_positive_lyapunov_exponent(paper):
+    out = steady_state(paper, settle_revolutions=3, statistics_revolutions=4, samples_per_revolution=360)
+    assert out.ok and out.regime == "not periodic" and out.period_revolutions == 0
+    assert float(out.lyapunov_exponent_per_s) > 0.0
+    assert float(out.residual) > 1e-3  # the section does not recur
+    for s in out.statistics.values():
+        assert np.isfinite([s["value"], s["ci95_low"], s["ci95_high"]]).all()
+        assert s["ci95_low"] <= s["value"] <= s["ci95_high"]
+
+
+def _long_run_value(u, revolutions=30):
+    mech = _build(jnp.asarray(u))
+    T = float(mech.period)
+    sim = jc.simulate(
+        mech,
+        t1=(revolutions + 1) * T,
+        n_samples=(revolutions + 1) * 3600 + 1,
+        metrics_start=revolutions * T,
+        save_samples=False,
+        rtol=1e-10,
+        atol=1e-10,
+        max_steps=10_000_000,
+    )
+    return float(sim.metrics[KEY])
+
+
+def _check_gradient(u0, h=0.01):
+    steady = steady_state(_build(jnp.asarray(u0)))
+    assert steady.periodic
+    value, grad = steady_value_and_grad(lambda sim: sim.metrics[KEY], _build, jnp.asarray(u0), steady)
+    assert float(value) == pytest.approx(_long_run_value(u0), rel=1e-6)
+    fd = []
+    for i in range(u0.size):
+        e = np.zeros(u0.size)
+        e[i] = h
+        fd.append((_long_run_value(u0 + e) - _long_run_value(u0 - e)) / (2 * h))
+    fd, grad = np.array(fd), np.asarray(grad)
+    norm = np.linalg.norm(fd)
+    big = np.abs(fd) > 0.05 * norm
+    assert np.all(np.sign(grad[big]) == np.sign(fd[big]))
+    assert np.linalg.norm(grad - fd) <= 0.02 * norm
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("design", ["cma_design_SI", "adam_design_SI"])
+def test_exact_gradient_against_long_run_differences(design):
+    _check_gradient(_unit_design(design))
