@@ -39,7 +39,7 @@ def history_columns(problem):
         ["iteration", "objective_deg", "rms_error_deg", "cost_deg"]
         + [f"grad_{n}_deg_per_SI" for n in problem.names]
         + [f"{n}_SI" for n in problem.names]
-        + ["projected_gradient", "step", "halvings", "seconds"]
+        + ["projected_gradient", "step", "halvings", "regime", "leading_multiplier", "seconds"]
     )
 
 

@@ -176,9 +176,9 @@ def objective_from_config(section: dict) -> AbstractObjective:
     if kind not in ("ensemble", "pathwise", "steady_state"):
         raise ParameterError(f"objective method {kind!r} is unknown; valid: 'ensemble', 'pathwise', 'steady_state'")
     if kind == "steady_state":
-        from .steady import SteadyState
+        from .steady import Steady
 
-        return SteadyState(**_fields(SteadyState, "objective", values))
+        return Steady(**_fields(Steady, "objective", values))
     kinds = {"ensemble": Ensemble, "pathwise": Pathwise}
     if "window_gradient" in values:
         mode = values.pop("window_gradient")

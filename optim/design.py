@@ -156,7 +156,8 @@ class DesignProblem(AbstractProblem):
         if name in ("crank_length", "offset", "crank_speed"):
             raise ParameterError(
                 f"{name!r} cannot be a DesignProblem variable: crank_length and offset "
-                "follow from the stroke, crank_speed fixes the objective's sample grid"
+                "follow from the stroke (the geometry's variables are rod_length and min_transmission_angle), "
+                "crank_speed fixes the objective's sample grid"
             )
         if name not in DERIVED:
             get_parameter(self.base, name)  # raises on unknown names

@@ -19,7 +19,7 @@ gradient is taken. A problem (:mod:`optim.problem`) combines them into its value
     diffrax.ForwardMode()``, one tangent per design variable), which compiles several
     times faster than reverse mode for the few variables of a design problem; such an
     objective is differentiated with :func:`value_and_grad` (``jax.jacfwd``).
-:class:`optim.steady.SteadyState`
+:class:`optim.steady.Steady`
     The metrics over one period of the steady periodic orbit, with the exact gradient
     of the implicit function theorem at the orbit (:mod:`optim.steady`).
 

@@ -42,8 +42,9 @@ from jaxcrank.physics.params import ParameterError
 
 from . import checkpoint
 from .objective import value_and_grad
-from .optimizers import AbstractOptimizer, adam
+from .optimizers import AbstractOptimizer, Projected, adam
 from .problem import AbstractProblem
+from .steady import Steady, SteadyEvaluator
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,7 +187,19 @@ def optimize(
     opt = settings.optimizer
     penalty = getattr(opt, "penalty", 10.0)
     # the start is not part of the compiled programs: runs from other starts share them
-    vg, extended = programs(dataclasses.replace(problem, start=None), penalty)
+    if isinstance(problem.objective, Steady):
+        # evaluated on the host, warm-started from the last orbit (not one compiled program)
+        if not isinstance(opt, Projected):
+            raise ParameterError("the steady-state objective needs a projected optimiser (e.g. adam()), not L-BFGS")
+        evaluator = SteadyEvaluator(problem)
+        vg, extended = _steady_programs(problem, evaluator), None
+    else:
+        if settings.guard is not None:
+            raise ParameterError(
+                "Settings.guard (the regime guard) needs the steady-state objective (optim.steady.Steady)"
+            )
+        evaluator = None
+        vg, extended = programs(dataclasses.replace(problem, start=None), penalty)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"
     if resume:
         if ckpt is None or not ckpt.exists():
@@ -227,7 +240,8 @@ def optimize(
         proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
         updates, state = opt.update(grad, state, u, value, f0, extended)
         u_new = problem.project(optax.apply_updates(u, updates))
-        u_new, halvings = _guarded(problem, settings.guard, u, u_new)
+        u_new, halvings = _guarded(problem, settings.guard, evaluator, u, u_new)
+        regime = evaluator.last_report if evaluator is not None else {}
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))
         grad_si = np.asarray(grad) * f0 / np.asarray(problem.span)
@@ -241,6 +255,8 @@ def optimize(
             "projected_gradient": proj_step,
             "step": step,
             "halvings": halvings,
+            "regime": regime.get("regime", ""),
+            "leading_multiplier": regime.get("leading_multiplier", float("nan")),
             "seconds": time.perf_counter() - tic,
         }
         history.append(rec)
@@ -270,13 +286,24 @@ def optimize(
     }
 
 
-def _guarded(problem: AbstractProblem, guard, u, u_new):
+def _steady_programs(problem: AbstractProblem, evaluator: SteadyEvaluator):
+    """The steady-state objective's ``value_and_grad(u, f0)`` on the scaled design, as
+    :func:`programs` gives for the windowed objectives (NaN where the solve failed)."""
+
+    def vg(u, f0):
+        value, grad, _ = evaluator.value_and_grad(np.asarray(problem.from_unit(jnp.asarray(u))))
+        return jnp.asarray(value / f0), jnp.asarray(grad * np.asarray(problem.span) / f0)
+
+    return vg
+
+
+def _guarded(problem: AbstractProblem, guard, evaluator, u, u_new):
     """``u_new``, or the step from ``u`` halved until ``guard`` accepts its design (at
     most ``guard.max_halvings`` times; then ``u`` is held), and the number of halvings."""
     if guard is None:
         return u_new, 0
     for k in range(guard.max_halvings + 1):
-        if guard.accept(problem, np.asarray(problem.from_unit(u_new))):
+        if guard.accept(evaluator, np.asarray(problem.from_unit(u_new))):
             return u_new, k
         u_new = u + 0.5 * (u_new - u)
     return u, guard.max_halvings + 1

@@ -84,7 +84,7 @@ class AbstractProblem(abc.ABC):
         if not isinstance(self.objective, AbstractObjective):
             raise ParameterError(
                 f"objective = {self.objective!r} must be an optim.objective.AbstractObjective "
-                "(Pathwise, Ensemble or SteadyState)"
+                "(Pathwise, Ensemble or optim.steady.Steady)"
             )
         if self.cost_weight < 0:
             raise ParameterError(f"cost_weight = {self.cost_weight:g} must be >= 0")
