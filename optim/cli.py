@@ -175,22 +175,24 @@ def objective_from_config(section: dict) -> AbstractObjective:
     kind = values.pop("method", "ensemble")
     if kind not in ("ensemble", "pathwise", "steady_state"):
         raise ParameterError(f"objective method {kind!r} is unknown; valid: 'ensemble', 'pathwise', 'steady_state'")
+    if "on_failure" in values:
+        mode = values.pop("on_failure")
+        if mode not in ("raise", "nan"):
+            raise ParameterError(f"objective on_failure {mode!r} is unknown; valid: 'raise', 'nan'")
+        values["throw"] = mode == "raise"
     if kind == "steady_state":
         from .steady import Steady
 
+        if isinstance(values.get("trend"), dict):
+            values["trend"] = objective_from_config(values["trend"])
         return Steady(**_fields(Steady, "objective", values))
-    kinds = {"ensemble": Ensemble, "pathwise": Pathwise}
     if "window_gradient" in values:
         mode = values.pop("window_gradient")
         adjoints = {"forward": diffrax.ForwardMode(), "reverse": diffrax.RecursiveCheckpointAdjoint()}
         if mode not in adjoints:
             raise ParameterError(f"objective window_gradient {mode!r} is unknown; valid: 'forward', 'reverse'")
         values["window_adjoint"] = adjoints[mode]
-    if "on_failure" in values:
-        mode = values.pop("on_failure")
-        if mode not in ("raise", "nan"):
-            raise ParameterError(f"objective on_failure {mode!r} is unknown; valid: 'raise', 'nan'")
-        values["throw"] = mode == "raise"
+    kinds = {"ensemble": Ensemble, "pathwise": Pathwise}
     return kinds[kind](**_fields(kinds[kind], "objective", values))
 
 
@@ -201,6 +203,8 @@ def objective_config(objective: AbstractObjective) -> dict:
     if "window_adjoint" in d:
         out["window_gradient"] = d.pop("window_adjoint")
     out["on_failure"] = "raise" if d.pop("throw") else "nan"
+    if "trend" in d:  # the steady-state objective's trend estimate: an [objective.trend] table
+        d["trend"] = None if objective.trend is None else objective_config(objective.trend)
     return {**out, **d}
 
 
@@ -212,9 +216,13 @@ def settings_from_config(section: dict) -> Settings:
     method = values.pop("method", "adam")
     accepted = OPTIMIZERS[method][1] if method in OPTIMIZERS else ()
     optimizer = from_settings(method, **{k: values.pop(k) for k in list(values) if k in accepted})
-    values = _fields(Settings, "optimizer", values)
-    if "optimizer" in values or "guard" in values:
-        raise ParameterError("[optimizer]: give method and its settings, not optimizer or guard objects")
+    valid = {f.name for f in dataclasses.fields(Settings)} - {"optimizer", "guard"}
+    bad = set(values) - valid
+    if bad:
+        raise ParameterError(
+            f"unknown [optimizer] keys {sorted(bad)} for method {method!r}; valid: method, "
+            f"{', '.join(accepted)}, {', '.join(sorted(valid))}"
+        )
     return Settings(optimizer=optimizer, **values)
 
 
@@ -222,6 +230,7 @@ def settings_config(settings: Settings) -> dict:
     """The ``[optimizer]`` table of ``settings`` (:func:`settings_from_config` reads it back)."""
     plain = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)}
     plain.pop("optimizer"), plain.pop("guard")
+    plain = {k: v for k, v in plain.items() if v is not None}
     return {**settings.optimizer.settings(), **plain}
 
 

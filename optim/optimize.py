@@ -61,6 +61,8 @@ class Settings:
         starts: designs to optimise from (:func:`multistart`): the problem's start, then
             ``starts - 1`` scrambled Sobol points of the box; 1 runs :func:`optimize` alone.
         seed: seed of those Sobol points.
+        max_seconds: wall-time budget of one :func:`optimize` call, s (None: none); the
+            run stops after the iteration that passes it.
         guard: optional regime guard (:class:`optim.steady.RegimeGuard`): a step to a
             design it refuses is halved until accepted (at most ``guard.max_halvings``
             times, then the iterate is held).
@@ -73,6 +75,7 @@ class Settings:
     patience: int = 3
     starts: int = 1
     seed: int = 0
+    max_seconds: float | None = None
     guard: object = None
 
     def __post_init__(self):
@@ -227,7 +230,7 @@ def optimize(
         first = (first[0] / f0, first[1] / f0)
         state, history, quiet, converged = opt.init(u), [], 0, None
 
-    done_here = 0
+    done_here, started = 0, time.perf_counter()
     start_it = len(history)
     bar = tqdm(total=settings.max_iterations, initial=start_it, desc=opt.label, unit="it", disable=not progress)
     while converged is None and len(history) < settings.max_iterations:
@@ -273,6 +276,8 @@ def optimize(
             checkpoint.save(Path(out), problem, settings, u, state, history, f0, quiet, converged)
         done_here += 1
         if stop_after is not None and done_here >= stop_after:
+            break
+        if settings.max_seconds is not None and time.perf_counter() - started > settings.max_seconds:
             break
     bar.close()
     best = min(history, key=lambda h: h["objective_deg"])

@@ -60,6 +60,8 @@ class Steady(AbstractObjective):
         statistics_revolutions, batch_revolutions: not periodic: revolutions of the
             long-run statistics and per batch of their batch means.
         rtol, atol: solver tolerances on the scaled state, > 0 (shooting needs tight ones).
+        max_steps: step budget of each solve of the steady-state search (a design that
+            needs more is a failed evaluation: NaN, or raises with ``throw``).
         trend: not periodic: the objective whose gradient serves as a trend estimate
             (an :class:`~optim.objective.Ensemble`; None: zero gradient there).
         throw: a failed steady-state solve raises (True) or gives NaN values (False).
@@ -77,6 +79,7 @@ class Steady(AbstractObjective):
     batch_revolutions: int = eqx.field(static=True, default=2)
     rtol: float = eqx.field(static=True, default=STEADY_DEFAULTS.rtol)
     atol: float = eqx.field(static=True, default=STEADY_DEFAULTS.atol)
+    max_steps: int = eqx.field(static=True, default=STEADY_DEFAULTS.max_steps)
     trend: Ensemble | None = eqx.field(static=True, default=None)
     throw: bool = eqx.field(static=True, default=True)
 
@@ -91,7 +94,7 @@ class Steady(AbstractObjective):
 
     def options(self) -> SolveOptions:
         """The solve settings of the shooting and of the orbit."""
-        return STEADY_DEFAULTS.replace(rtol=self.rtol, atol=self.atol)
+        return STEADY_DEFAULTS.replace(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
 
     def solve(self, mech: Mechanism, warm_start=None) -> S.SteadyState:
         """The steady state of the concrete ``mech`` (:func:`jaxcrank.steady_state`), warm

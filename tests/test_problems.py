@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from jaxcrank import paper
+from jaxcrank.physics.params import ParameterError
 from optim import search
 from optim.objective import Ensemble, Pathwise, eq19
 from optim.problem import ParameterProblem, paper_problem, robust_problem
@@ -144,3 +145,89 @@ def test_grid_reports_failed_designs_without_nan_in_ok_rows():
     prob = paper_problem(Pathwise(t_start=0.0, t_end=2e-3, max_steps=50))
     values, ok = search.evaluate(prob, np.array([[0.12, 0.40], [0.11, 0.41]]), progress=False)
     assert not ok.any() and np.isnan(values).all()
+
+
+def _implemented(cls):
+    import inspect
+
+    return {
+        name
+        for name, member in vars(cls).items()
+        if not name.startswith("__")  # dataclass machinery (__eq__, __repr__, ...)
+        and (inspect.isfunction(member) or isinstance(member, property))
+        and not getattr(member, "__isabstractmethod__", False)
+        and not (isinstance(member, property) and getattr(member.fget, "__isabstractmethod__", False))
+    }
+
+
+@pytest.mark.parametrize(
+    "base, finals",
+    [
+        ("optim.problem.AbstractProblem", ("optim.problem.ParameterProblem", "optim.design.DesignProblem")),
+        ("optim.objective.AbstractObjective", ("optim.objective.Pathwise", "optim.objective.Ensemble")),
+        ("optim.objective.AbstractObjective", ("optim.steady.Steady",)),
+        ("optim.optimizers.AbstractOptimizer", ("optim.optimizers.Projected", "optim.optimizers.LBFGS")),
+    ],
+)
+def test_abstract_or_final_no_implemented_method_is_overridden(base, finals):
+    """An abstract base and final subclasses: the base cannot be instantiated, and no
+    subclass overrides a method the base implements."""
+    import importlib
+
+    def get(path):
+        module, name = path.rsplit(".", 1)
+        return getattr(importlib.import_module(module), name)
+
+    base_cls = get(base)
+    with pytest.raises(TypeError):
+        base_cls()
+    inherited = _implemented(base_cls) - {"__init__", "__post_init__", "__check_init__"}
+    for final in finals:
+        cls = get(final)
+        assert not (inherited & set(vars(cls))), (final, inherited & set(vars(cls)))
+
+
+def test_optim_has_no_import_cycle():
+    """The module-level imports between optim's modules form no cycle (problem.py no
+    longer imports design.py; the presets live in presets.py)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "optim"
+    graph = {}
+    for path in root.glob("*.py"):
+        tree = ast.parse(path.read_text())
+        deps = set()
+        for node in tree.body:  # module level only: imports inside functions are deferred on purpose
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                deps |= {node.module} if node.module else {a.name for a in node.names}
+        graph[path.stem] = deps
+    state = {}
+
+    def visit(m, stack):
+        state[m] = "open"
+        for d in graph.get(m, ()):
+            assert state.get(d) != "open", f"import cycle: {' -> '.join(stack + [m, d])}"
+            if d not in state:
+                visit(d, stack + [m])
+        state[m] = "done"
+
+    for m in graph:
+        if m not in state:
+            visit(m, [])
+
+
+def test_steady_objective_config_round_trip():
+    from optim.cli import build, resolved
+    from optim.steady import Steady
+
+    problem, settings = build({"problem": "design", "objective": {"method": "steady_state", "rtol": 1e-8}})
+    assert isinstance(problem.objective, Steady) and problem.objective.rtol == 1e-8
+    again, _ = build(resolved(problem, settings, "design"))
+    assert again.objective == problem.objective
+    with pytest.raises(ParameterError, match="objective method 'bogus' is unknown"):
+        build({"problem": "paper", "objective": {"method": "bogus"}})
+    with pytest.raises(ParameterError, match="optimiser method 'sgd' is unknown"):
+        build({"problem": "paper", "optimizer": {"method": "sgd"}})
+    with pytest.raises(ParameterError, match=r"unknown \[optimizer\] keys \['learning_rate'\] for method 'lbfgs'"):
+        build({"problem": "paper", "optimizer": {"method": "lbfgs", "learning_rate": 0.1}})
