@@ -102,6 +102,12 @@ def add_parser(sub):
         "compiling it again (default: $JAXCRANK_CACHE_DIR or ~/.cache/jaxcrank/xla)",
     )
     p.add_argument("--no-cache", action="store_true", help="do not read or write the compilation cache")
+    p.add_argument(
+        "--regime",
+        action="store_true",
+        help="also classify the final design's steady state (periodic or not; a steady-state solve, "
+        "about a minute) into result.json's final_regime",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -263,6 +269,14 @@ def _subclass_fields(problem: Problem) -> dict:
     }
 
 
+def _regime(problem: Problem, x) -> dict:
+    """The steady-state regime of SI design ``x`` (:func:`optim.steady.report`)."""
+    from .steady import Steady, report
+
+    objective = problem.objective if isinstance(problem.objective, Steady) else Steady(throw=False)
+    return report(objective.solve(problem.mechanism(x)))
+
+
 def _drop_none(d):
     return {k: (_drop_none(v) if isinstance(v, dict) else v) for k, v in d.items() if v is not None}
 
@@ -342,6 +356,7 @@ def run(args) -> int:
         "starts": res.get("runs"),
         "best_start": res.get("best_start"),
         "grid": grid_info,
+        "final_regime": _regime(problem, res["final"]) if args.regime else None,
         "paper": {
             "optimum_deg": PAPER_OPTIMUM_DEG,
             "reduction_percent": PAPER_REDUCTION_PCT,

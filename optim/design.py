@@ -52,8 +52,9 @@ from jaxtyping import Array, Float
 
 from jaxcrank.physics.params import ParameterError, get_parameter, paper, set_parameters
 
-from .objective import EQ19, AbstractObjective, Ensemble, safe_sqrt
+from .objective import EQ19, AbstractObjective, safe_sqrt
 from .problem import AbstractProblem
+from .steady import Steady
 
 #: design variables that are not mechanism fields (name -> SI unit)
 DERIVED = {"min_transmission_angle": "rad", "rod_inertia_ratio": "1"}
@@ -325,8 +326,9 @@ def design_problem(
     is 1/12), slider mass 1-2.5 kg, the bearings' friction coefficient 0.02-0.15
     (lubricated to dry steel) and the rod bearings' Young's modulus 100-210 GPa
     (bronze to steel bushings). Minimises Eq. 19 + :data:`DESIGN_WEIGHTS` terms +
-    cost. ``variables``: a subset of the names (the others stay at their start
-    values, folded into the base mechanism)."""
+    cost. ``objective``: default the steady state (:class:`optim.steady.Steady`, the
+    terms over one period of the periodic orbit). ``variables``: a subset of the names
+    (the others stay at their start values, folded into the base mechanism)."""
     chosen = [v for v in DESIGN_VARIABLES if variables is None or v[0] in variables]
     base = paper()
     fixed = [v for v in DESIGN_VARIABLES if v not in chosen]
@@ -344,7 +346,7 @@ def design_problem(
         lower=tuple(v[1] for v in chosen),
         upper=tuple(v[2] for v in chosen),
         start=tuple(v[3] for v in chosen) if start is None else tuple(start),
-        objective=Ensemble() if objective is None else objective,
+        objective=Steady() if objective is None else objective,
         cost_weight=cost_weight if has_clearance else 0.0,
         cost_reference=5e-4,
         title=f"design: {len(chosen)} variables, stroke 240 mm, transmission >= 40 deg",

@@ -191,6 +191,10 @@ def report(steady: S.SteadyState) -> dict:
     return out
 
 
+#: compiled value-and-gradient programs: (problem without its start, period, dynamic subspace) -> program
+_PROGRAMS: dict = {}
+
+
 class SteadyEvaluator:
     """Value and exact gradient of a problem measured by a :class:`Steady` objective, at
     concrete designs, each steady state warm-started from the last periodic one.
@@ -212,7 +216,6 @@ class SteadyEvaluator:
         self.objective = problem.objective
         self.last = None  # the last periodic steady state: the next warm start
         self._steady = {}
-        self._programs = {}  # (period, dynamic subspace) -> compiled value and gradient
         self._trend = None
         self.last_report = {}  # report() of the last evaluated design
 
@@ -252,18 +255,21 @@ class SteadyEvaluator:
     def _program(self, steady: S.SteadyState):
         """The compiled value and gradient for the orbits of ``steady``'s period and
         dynamic subspace, taking the design and the orbit's section state and monodromy:
-        one program serves every design of a regime."""
-        key = (steady.period_revolutions, steady.active)
-        if key not in self._programs:
-            template = _light(steady)
+        one program serves every design of a regime, and every evaluator of the same
+        problem (its start aside: multistart runs share it)."""
+        key = (dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
+        if key not in _PROGRAMS:
+            problem, objective, template = key[0], self.objective, _light(steady)
 
             def f(x, section_state, monodromy):
                 light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
-                rms = self.objective.rms_at(self.problem.mechanism(x), light)
-                return self.problem.loss(rms) + self.problem.cost(x)
+                rms = objective.rms_at(problem.mechanism(x), light)
+                return problem.loss(rms) + problem.cost(x)
 
-            self._programs[key] = jax.jit(value_and_grad(f, True))
-        return self._programs[key]
+            if len(_PROGRAMS) >= 8:
+                _PROGRAMS.pop(next(iter(_PROGRAMS)))
+            _PROGRAMS[key] = jax.jit(value_and_grad(f, True))
+        return _PROGRAMS[key]
 
     def value_and_grad(self, x) -> tuple[float, np.ndarray, dict]:
         """``(value, gradient, regime)`` at SI design ``x``: the objective in degrees, its
