@@ -13,7 +13,7 @@ import pytest
 
 import jaxcrank as jc
 from jaxcrank.numerics import shooting
-from jaxcrank.numerics.steady import RESULTS, SteadyStateError, steady_state, steady_value_and_grad
+from jaxcrank.numerics.steady import RESULTS, SteadyStateError, carry_state, steady_state, steady_value_and_grad
 from jaxcrank.physics import model
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -152,13 +152,28 @@ def test_paper_preset_is_not_periodic_with_positive_lyapunov_exponent(paper):
         assert s["ci95_low"] <= s["value"] <= s["ci95_high"]
 
 
-def _long_run_value(u, revolutions=30):
+def _settled(u, revolutions=30):
+    """A long plain simulation from rest (no shooting): the mechanism and its section
+    state after ``revolutions``."""
+    mech = _build(jnp.asarray(u))
+    ts = jnp.arange(revolutions + 1) * float(mech.period)
+    sim = jc.simulate(mech, ts=ts, rtol=1e-10, atol=1e-10, max_steps=10_000_000)
+    return mech, sim.ys[-1]
+
+
+def _continued_value(centre, u, revolutions=10):
+    """Eq. 19 over one revolution after ``revolutions`` more of the design ``u``, continued
+    from the settled state of the centre design (pins carried over in their bearings, the
+    idle approach-speed memories with them): the steady state the gradient describes, by
+    plain simulation."""
+    old, y = centre
     mech = _build(jnp.asarray(u))
     T = float(mech.period)
     sim = jc.simulate(
         mech,
         t1=(revolutions + 1) * T,
         n_samples=(revolutions + 1) * 3600 + 1,
+        y0=carry_state(old, y, mech).at[-2:].set(0.0),
         metrics_start=revolutions * T,
         save_samples=False,
         rtol=1e-10,
@@ -168,16 +183,19 @@ def _long_run_value(u, revolutions=30):
     return float(sim.metrics[KEY])
 
 
-def _check_gradient(u0, h=0.01):
+def _check_gradient(u0, h=1e-3):
+    """The implicit-function-theorem gradient (unit-box variables) against central
+    differences (``h`` of the box) of long plain simulations."""
     steady = steady_state(_build(jnp.asarray(u0)))
     assert steady.periodic
     value, grad = steady_value_and_grad(lambda sim: sim.metrics[KEY], _build, jnp.asarray(u0), steady)
-    assert float(value) == pytest.approx(_long_run_value(u0), rel=1e-6)
+    centre = _settled(u0)
+    assert float(value) == pytest.approx(_continued_value(centre, u0), rel=1e-6)
     fd = []
     for i in range(u0.size):
         e = np.zeros(u0.size)
         e[i] = h
-        fd.append((_long_run_value(u0 + e) - _long_run_value(u0 - e)) / (2 * h))
+        fd.append((_continued_value(centre, u0 + e) - _continued_value(centre, u0 - e)) / (2 * h))
     fd, grad = np.array(fd), np.asarray(grad)
     norm = np.linalg.norm(fd)
     big = np.abs(fd) > 0.05 * norm
@@ -185,7 +203,45 @@ def _check_gradient(u0, h=0.01):
     assert np.linalg.norm(grad - fd) <= 0.02 * norm
 
 
+def _periodic_designs():
+    """Unit-box designs of the nine-variable problem that are periodic: CMA-ES's and the
+    projected Adam's best of the design study, two Adam runs of the head-to-head
+    (bench/results), and CMA-ES's best with the slider mass at mid-box and at its upper
+    bound (one and then both approach-speed memories active on the orbit)."""
+    prob = _design_problem()
+    lo, hi = np.array(prob.lower), np.array(prob.upper)
+    study = json.loads((ROOT / "bench" / "results" / "design_study.json").read_text())["optimum"]
+    runs = json.loads((ROOT / "bench" / "results" / "design.json").read_text())["problems"]
+    nine = next(p for p in runs if p["n_variables"] == 9)["methods"]["ours"]["runs"]
+    xs = [study["cma_design_SI"], study["adam_design_SI"]] + [r["final_SI"] for r in nine[:2]]
+    units = [(np.asarray(x) - lo) / (hi - lo) for x in xs]
+    for slider in (0.5, 1.0):
+        u = units[0].copy()
+        u[prob.names.index("slider_mass")] = slider
+        units.append(u)
+    return units
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("design", ["cma_design_SI", "adam_design_SI"])
-def test_exact_gradient_against_long_run_differences(design):
-    _check_gradient(_unit_design(design))
+@pytest.mark.parametrize("index", range(6))
+def test_exact_gradient_against_long_run_differences(index):
+    _check_gradient(_periodic_designs()[index])
+
+
+@pytest.mark.slow
+def test_cli_writes_summary_orbit_and_section_plot(periodic, tmp_path):
+    from jaxcrank.runs import cli
+
+    mech, _ = periodic
+    jc.config.save(mech, tmp_path / "design.toml")
+    out = tmp_path / "run"
+    args = ["steady", "--config", str(tmp_path / "design.toml"), "--out", str(out), "--samples-per-revolution", "360"]
+    assert cli.main(args) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["regime"] == "periodic" and summary["period_revolutions"] == 1
+    mods = summary["floquet_multipliers"]
+    assert mods == sorted(mods, reverse=True) and mods[0] < 1.0
+    assert summary["metrics"][KEY] > 0.0 and "peak_contact_force_B_N" in summary["metrics"]
+    for name in ("orbit.csv", "poincare_section.png", "config.toml", "figures/slider_x.png"):
+        assert (out / name).exists(), name
+    assert cli.main(["steady", "--out", str(out), "--settle-revolutions", "0"]) == 2

@@ -131,7 +131,7 @@ class SteadyState(eqx.Module):
     metrics: dict
     lyapunov_exponent_per_s: Float[Array, ""]
     statistics: dict | None
-    revolutions: dict = eqx.field(static=True)
+    revolutions: dict
     options: SolveOptions = eqx.field(static=True)
     samples_per_revolution: int = eqx.field(static=True)
 
@@ -155,15 +155,24 @@ def _neutral_names(mech, active):
     return tuple(names) + ("driver_work", "dissipated_work")
 
 
+def carry_state(old: Mechanism, y: Float[Array, " state"], new: Mechanism) -> Float[Array, " state"]:
+    """The scaled section state (t = 0) of ``old`` carried over to the design ``new``
+    (clearance at B and C in both): each pin keeps its place and motion in its bearing
+    relative to the clearance (eccentricities and their rates scaled by the ratio of the
+    clearances, so a pin in contact stays in contact at nearly the same penetration);
+    approach-speed memories (m/s) and works (J) kept in SI units."""
+    d, dd = model.eccentricities(old, 0.0, y)
+    ratio = jnp.stack([new.joint_B.clearance / old.joint_B.clearance, new.joint_C.clearance / old.joint_C.clearance])
+    return model.state_from_eccentricities(new, 0.0, d * ratio[:, None], dd * ratio[:, None], model.auxiliary(old, y))
+
+
 def _warm_state(mech, warm):
     """A scaled section state for ``mech`` from a previous :class:`SteadyState` (its
-    pin-in-bearing state carried over physically) or a scaled state array."""
+    pin-in-bearing state carried over by :func:`carry_state`) or a scaled state array."""
     if isinstance(warm, SteadyState):
         old, y = warm.mechanism, warm.section_state
         if model.clearance_joints(old) == model.clearance_joints(mech) == ("B", "C"):
-            d, dd = model.eccentricities(old, 0.0, y)
-            rest = model.auxiliary(old, y)
-            y = model.state_from_eccentricities(mech, 0.0, d, dd, rest)
+            y = carry_state(old, y, mech)
     else:
         y = jnp.asarray(warm, dtype=float)
     if y.shape != (model.state_size(mech),):
