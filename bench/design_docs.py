@@ -37,6 +37,26 @@ def head_to_head(d) -> list[str]:
     return lines
 
 
+def _verdict(d) -> str:
+    """The target's verdict in words: a measured speedup, or a bound when a side never got there."""
+    (p,) = d["problems"]
+    budget = d["budget_s_per_method"]
+    ours = p["methods"]["ours"]["time_to_1pct_s"]
+    free = [p["methods"][k]["time_to_1pct_s"] for k in p["methods"] if k != "ours"]
+    free = [t for t in free if t is not None]
+    if ours is None:
+        return "Ours did not get within 1 % in its budget: missed."
+    if not free:
+        bound = budget / ours
+        return (
+            f"Ours got within 1 % at {ours:.0f} s; no gradient-free method got there within its {budget:.0f} s, "
+            f"so the speedup is more than {bound:.0f}x but not measured beyond that: the 5x target is "
+            + ("met." if bound >= 5 else "not demonstrated.")
+        )
+    speedup = min(free) / ours
+    return f"Measured speedup: {speedup:.2f}x: " + ("met." if speedup >= 5 else "missed.")
+
+
 def ours_details(d) -> list[str]:
     """How our method got into the periodic regime and what its guard did."""
     (p,) = d["problems"]
@@ -180,19 +200,18 @@ def main():
         "![convergence](bench_results/design.png)",
         "",
         "Target: at nine variables our optimiser within 1 % of the best held-out value at least 5x sooner than "
-        f"the best gradient-free method. Measured speedup: {_s(big['speedup_vs_best_gradient_free'], '{:.2f}')}"
-        f" ({'met' if (big['speedup_vs_best_gradient_free'] or 0) >= 5 else 'missed'}; the checkpoints are "
-        f"at {', '.join(f'{f:g}' for f in d['checkpoint_fractions'])} of the budget, so a speedup is resolved "
-        "only to those steps).",
+        f"the best gradient-free method. {_verdict(d)} (The checkpoints are at "
+        f"{', '.join(f'{f:g}' for f in d['checkpoint_fractions'])} of the budget, so times are resolved only to "
+        "those steps; one seed.)",
         "",
     ]
     if s is not None:
         text += [
             "## Earlier study on the start-up window: optimum, interior check, Pareto front",
             "",
-            f"Command: `{s['command']}`. This study measured the objective over a window of the start-up from "
-            "rest, (0.02, 0.04] s, with the ensemble gradient; its designs are kept for reference (the steady-state "
-            "tests use its CMA-ES design, which is periodic).",
+            f"Command: `{s['command'].split(' --note')[0]}`. This study measured the objective over a window "
+            "of the start-up from rest, (0.02, 0.04] s, with the ensemble gradient; its designs are kept for "
+            "reference (the steady-state tests use its CMA-ES design, which is periodic).",
             "",
             *study(s),
             "",
