@@ -259,7 +259,7 @@ def optimize(
             "step": step,
             "halvings": halvings,
             "regime": regime.get("regime", ""),
-            "leading_multiplier": regime.get("leading_multiplier", float("nan")),
+            "leading_multiplier": regime.get("leading_multiplier"),
             "seconds": time.perf_counter() - tic,
         }
         history.append(rec)
