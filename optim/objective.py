@@ -229,11 +229,14 @@ class Ensemble(AbstractObjective):
         exact = {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in RMS_METRICS}
         return jax.lax.stop_gradient(exact), W.window_starts(sim)
 
-    def window_sums(self, mech: Mechanism, starts: W.Starts, i) -> tuple[dict[str, Float[Array, ""]], jax.Array]:
+    def window_sums(
+        self, mech: Mechanism, starts: W.Starts, i, grid: W.Grid | None = None
+    ) -> tuple[dict[str, Float[Array, ""]], jax.Array]:
         """Window ``i`` re-solved for ``mech`` from the carried-over start state: the
         sums of squares of the RMS metrics' signals over its samples (units squared; 0
-        where the window failed) and whether it finished."""
-        grid = self.grid(mech)
+        where the window failed) and whether it finished. ``grid``: the sample grid of
+        the base design (default :meth:`grid` of ``mech``, which needs a concrete crank speed)."""
+        grid = self.grid(mech) if grid is None else grid
         ts, ys, ok = W.solve_window(
             mech,
             starts,

@@ -73,7 +73,7 @@ def window_sums(
     carried-over start state (:meth:`optim.objective.Ensemble.window_sums`): the sums of
     squares of the metrics' signals over its samples, stacked in the order of
     :data:`METRICS` (units squared), and whether it finished."""
-    sums, ok = obj.window_sums(set_parameters(base, names, x), starts, i)
+    sums, ok = obj.window_sums(set_parameters(base, names, x), starts, i, obj.grid(base))
     return jnp.stack([sums[k] for k in METRICS]), ok
 
 
