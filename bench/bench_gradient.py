@@ -15,7 +15,7 @@ folder the first one filled (:mod:`jaxcrank.runs.cache`):
   (median of three calls); ``value_deg`` and ``gradient_deg_per_m`` of that call.
 
 Configurations: the default (forward-mode windows with ``rodas4``, one after another)
-against reverse-mode windows (``Objective(window_gradient="reverse")``) in the same
+against reverse-mode windows (``Ensemble(window_adjoint=diffrax.RecursiveCheckpointAdjoint())``) in the same
 run. Then the command line end to end: ``jaxcrank optimize --grid 0`` cold (empty
 cache) and warm (a second run in a new process), wall seconds and iterations.
 ``--quick`` uses an evaluation window of (0.1, 0.12] s and 2 windows (a smoke run).
@@ -44,11 +44,15 @@ settings = json.loads(sys.argv[2])
 import numpy as np
 from jaxcrank import cache
 cache.enable(sys.argv[3])
-from optim.objective import Objective
+from optim.objective import Ensemble
 from optim.optimize import programs
 from optim.problem import paper_problem
 import dataclasses
-prob = paper_problem(Objective(**settings))
+import diffrax
+settings = dict(settings)
+if settings.pop("window_gradient", "forward") == "reverse":
+    settings["window_adjoint"] = diffrax.RecursiveCheckpointAdjoint()
+prob = paper_problem(Ensemble(**settings))
 vg, _ = programs(dataclasses.replace(prob, start=None))
 u = np.asarray(prob.start_unit())
 t = time.perf_counter()

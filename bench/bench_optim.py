@@ -24,8 +24,9 @@ import numpy as np
 from scipy.optimize import minimize
 
 from optim import search
-from optim.objective import Objective
+from optim.objective import Ensemble
 from optim.optimize import Settings, optimize
+from optim.optimizers import adam
 from optim.problem import paper_problem
 
 
@@ -36,7 +37,7 @@ def main(argv=None):
     ap.add_argument("--iterations", type=int, default=15)
     ap.add_argument("--out", type=Path, default=Path("bench/results/optim.json"))
     args = ap.parse_args(argv)
-    prob = paper_problem(Objective(t_end=args.t_end))
+    prob = paper_problem(Ensemble(t_end=args.t_end))
     out = {
         "problem": prob.description,
         "t_end_s": args.t_end,
@@ -56,7 +57,7 @@ def main(argv=None):
     best = grid.best_value
 
     tic = time.perf_counter()
-    res = optimize(prob, Settings(method="adam", max_iterations=args.iterations, learning_rate=0.2))
+    res = optimize(prob, Settings(optimizer=adam(0.2), max_iterations=args.iterations))
     wall = time.perf_counter() - tic
     h = res["history"]
     first = h[0]["seconds"]
@@ -79,7 +80,7 @@ def main(argv=None):
     }
 
     evals = []
-    f = jax.jit(lambda x: prob.objective_value(x, method="pathwise"))
+    f = jax.jit(prob.with_objective(search.pathwise_of(prob.objective)).objective_value)
 
     def fun(x):
         v = float(f(np.asarray(x)))

@@ -4,7 +4,7 @@
 
 At projected Adam's best design of ``bench/results/design_study.json`` (nine
 variables, the benchmark's window): each :data:`optim.design.TERMS` entry's
-ensemble gradient (:meth:`DesignProblem.ensemble_terms`, reverse mode) against
+ensemble gradient (:class:`optim.objective.Ensemble` in reverse mode) against
 secant slopes of the same term from the forward solve over +-delta along every
 scaled coordinate (clipped to the box), in term units per unit of the scaled variable.
 """
@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-import bench_design as B  # noqa: E402
+import _window_design as B  # noqa: E402
 
 
 def main(argv=None):
@@ -31,22 +31,32 @@ def main(argv=None):
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "design_gradient_terms.json")
     ap.add_argument("--delta", type=float, default=0.05)
     args = ap.parse_args(argv)
+    import dataclasses
+
+    import diffrax
     import jax
     import jax.numpy as jnp
 
     from optim.design import TERMS
+    from optim.search import pathwise_of
 
     study = json.loads((ROOT / "bench/results/design_study.json").read_text())
     prob = B.build("design_9var", B.OBJECTIVE)
     u0 = np.asarray(prob.to_unit(np.asarray(study["optimum"]["adam_design_SI"])))
-    terms = jax.jit(lambda u: prob.terms(prob.from_unit(u), throw=False)[0])
-    jac = np.asarray(jax.jit(jax.jacrev(lambda u: prob.ensemble_terms(prob.from_unit(u))))(jnp.asarray(u0)))
+    pathwise = prob.with_objective(pathwise_of(prob.objective))
+    terms = jax.jit(lambda u: jnp.stack([pathwise.terms(prob.from_unit(u))[k] for k in TERMS]))
+    reverse = prob.with_objective(
+        dataclasses.replace(prob.objective, window_adjoint=diffrax.RecursiveCheckpointAdjoint())
+    )
+    jac = np.asarray(
+        jax.jit(jax.jacrev(lambda u: jnp.stack([reverse.terms(prob.from_unit(u))[k] for k in TERMS])))(jnp.asarray(u0))
+    )
     secant = np.zeros_like(jac)
     for j in range(prob.n):
         lo, hi = u0.copy(), u0.copy()
         lo[j], hi[j] = max(u0[j] - args.delta, 0.0), min(u0[j] + args.delta, 1.0)
         secant[:, j] = (np.asarray(terms(hi)) - np.asarray(terms(lo))) / (hi[j] - lo[j])
-    w = np.asarray(prob.weight_vector())
+    w = np.asarray([prob.weight_of()[k] for k in TERMS])
     out = {
         "command": "python bench/design_gradient_terms.py " + " ".join(argv if argv is not None else sys.argv[1:]),
         "objective": B.OBJECTIVE,

@@ -4,9 +4,9 @@ accuracy / manufacturing-cost Pareto front.
 ``python bench/design_study.py [--out bench/results/design_study.json] [--iterations 60]``
 
 1. Projected Adam (:func:`optim.optimize.optimize`) on :func:`optim.design.design_problem`
-   with the benchmark's evaluation window (:data:`bench_design.OBJECTIVE`), and CMA-ES
+   with the benchmark's evaluation window (:data:`_window_design.OBJECTIVE`), and CMA-ES
    from the same start on the common evaluator; the better of the two is the optimum.
-2. Interior check: the common forward evaluator of ``bench_design`` at the best
+2. Interior check: the common forward evaluator of ``_window_design`` at the best
    design, at ``+-delta`` along every scaled coordinate (clipped to the box) and at
    random points within ``delta`` (max norm) of it; records which variables sit
    on a bound and how many neighbours are lower.
@@ -39,7 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-import bench_design as B  # noqa: E402
+import _window_design as B  # noqa: E402
 
 LAMBDAS = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05)  # deg per unit of cost_index
 
@@ -62,6 +62,7 @@ def main(argv=None):
 
     jax.config.update("jax_enable_x64", True)
     from optim.optimize import Settings, optimize
+    from optim.optimizers import adam
 
     tic = time.perf_counter()
     prob = B.build("design_9var", objective)
@@ -71,7 +72,7 @@ def main(argv=None):
         v, ok = f(jnp.asarray(x))
         return float(v) if bool(ok) else float("inf")
 
-    res = optimize(prob, Settings(max_iterations=args.iterations, learning_rate=0.1), progress=False)
+    res = optimize(prob, Settings(optimizer=adam(0.1), max_iterations=args.iterations), progress=False)
     hist = res["history"]
     xs = np.array([[h[f"{n}_SI"] for n in prob.names] for h in hist])
     scores = np.array([score(prob, x) for x in xs])

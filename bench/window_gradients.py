@@ -25,7 +25,8 @@ import numpy as np
 
 from jaxcrank import simulate
 from jaxcrank.analysis.outputs import transmission_angle_error
-from optim import objective as O
+from optim import windows as W
+from optim.objective import EQ19, Ensemble
 from optim.problem import paper_problem
 
 
@@ -45,10 +46,11 @@ def main(argv=None):
         if old["design_m"] == args.design and old["window_s"] == args.window:
             report["solvers"] = old["solvers"]
     for solver in args.solvers:
-        obj = O.Objective(window=args.window, windows=0, window_solver=solver, window_max_steps=50_000)
+        obj = Ensemble(window=args.window, windows=0, window_solver=solver, window_max_steps=50_000)
         prob = paper_problem(obj)
         mech = prob.mechanism(x0)
-        exact, starts = O.reference(mech, obj)
+        exact, starts = obj.reference(mech)
+        exact = exact[EQ19]
         _, _, n_window, dt = obj.grid(mech)
 
         def window(x, i, tol, solver=solver, prob=prob, starts=starts, dt=dt, n_window=n_window):
@@ -57,7 +59,7 @@ def main(argv=None):
             sim = simulate(
                 m,
                 ts=ts,
-                y0=O.start_state(m, starts, i),
+                y0=W.start_state(m, starts, i),
                 solver=solver,
                 rtol=tol,
                 atol=tol,

@@ -28,12 +28,14 @@ loads them instead of tracing and compiling again.
 Config TOML (every key optional)::
 
     problem = "paper"            # or "tolerance", "robust", "design" (optim/design.py)
-    [optimizer]                  # optim.optimize.Settings fields
-    method = "adam"
+    [optimizer]                  # method (optim.optimizers.OPTIMIZERS) and its settings,
+    method = "adam"              # then optim.optimize.Settings fields
+    learning_rate = 0.1          # adam; lbfgs takes penalty, max_linesearch_steps
     max_iterations = 30
     starts = 1                   # > 1: the best of several starts (Sobol points, seed)
-    [objective]                  # optim.objective.Objective fields
-    t_end = 0.3
+    [objective]                  # method: "ensemble", "pathwise" or "steady_state"
+    method = "ensemble"          # (optim.objective), then the fields of that class;
+    t_end = 0.3                  # window_gradient = "forward"/"reverse" picks the adjoint
     [design]                     # override the problem's variables
     names = ["crank_length", "rod_length"]
     lower = [0.110, 0.390]
@@ -65,9 +67,11 @@ from jaxcrank import cache, reference
 from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
 
-from .objective import Objective
-from .optimize import METHODS, Settings, multistart, optimize
-from .problem import PROBLEMS, Problem
+from .objective import AbstractObjective, Ensemble, Pathwise
+from .optimize import Settings, multistart, optimize
+from .optimizers import OPTIMIZERS, from_settings
+from .presets import PROBLEMS
+from .problem import AbstractProblem as Problem
 
 PAPER_OPTIMUM_DEG = reference.value("optimisation", "optimum_deg")
 GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
@@ -91,7 +95,7 @@ def add_arguments(p):
         "--resume", action="store_true", help="continue the run in --out from its last checkpoint (--out must exist)"
     )
     p.add_argument("--problem", choices=sorted(PROBLEMS), help="problem preset (overrides the config's)")
-    p.add_argument("--method", choices=METHODS, help="optimiser (default adam)")
+    p.add_argument("--method", choices=sorted(OPTIMIZERS), help="optimiser (default adam)")
     p.add_argument("--iterations", type=int, help="max iterations (default 30)")
     p.add_argument(
         "--starts",
@@ -124,6 +128,12 @@ def add_arguments(p):
         "compiling it again (default: $JAXCRANK_CACHE_DIR or ~/.cache/jaxcrank/xla)",
     )
     p.add_argument("--no-cache", action="store_true", help="do not read or write the compilation cache")
+    p.add_argument(
+        "--regime",
+        action="store_true",
+        help="also classify the final design's steady state (periodic or not; a steady-state solve, "
+        "about a minute) into result.json's final_regime",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
 
@@ -167,8 +177,8 @@ def build(cfg) -> tuple[Problem, Settings]:
     name = cfg.get("problem", "paper")
     if name not in PROBLEMS:
         raise ParameterError(f"problem {name!r} is unknown; valid: {', '.join(PROBLEMS)}")
-    obj = Objective(**_fields(Objective, "objective", cfg.get("objective", {})))
-    problem = PROBLEMS[name](objective=obj)
+    section = cfg.get("objective", {})
+    problem = PROBLEMS[name](**({"objective": objective_from_config(section)} if section else {}))
     if "mechanism" in cfg:
         problem = dataclasses.replace(problem, base=mech_config.from_dict(cfg["mechanism"]))
     design = dict(cfg.get("design", {}))
@@ -185,15 +195,84 @@ def build(cfg) -> tuple[Problem, Settings]:
             for k, v in design.items()
         }
         problem = dataclasses.replace(problem, **design)
-    settings = Settings(**_fields(Settings, "optimizer", cfg.get("optimizer", {})))
-    return problem, settings
+    return problem, settings_from_config(cfg.get("optimizer", {}))
+
+
+def objective_from_config(section: dict) -> AbstractObjective:
+    """The objective of an ``[objective]`` table: ``method`` ("ensemble" by default,
+    "pathwise" or "steady_state") and the fields of that class; ``window_gradient``
+    ("forward" or "reverse") picks an ensemble's window adjoint, ``on_failure``
+    ("raise" or "nan") its ``throw``."""
+    import diffrax
+
+    values = dict(section)
+    kind = values.pop("method", "ensemble")
+    if kind not in ("ensemble", "pathwise", "steady_state"):
+        raise ParameterError(f"objective method {kind!r} is unknown; valid: 'ensemble', 'pathwise', 'steady_state'")
+    if "on_failure" in values:
+        mode = values.pop("on_failure")
+        if mode not in ("raise", "nan"):
+            raise ParameterError(f"objective on_failure {mode!r} is unknown; valid: 'raise', 'nan'")
+        values["throw"] = mode == "raise"
+    if kind == "steady_state":
+        from .steady import Steady
+
+        if isinstance(values.get("trend"), dict):
+            values["trend"] = objective_from_config(values["trend"])
+        return Steady(**_fields(Steady, "objective", values))
+    if "window_gradient" in values:
+        mode = values.pop("window_gradient")
+        adjoints = {"forward": diffrax.ForwardMode(), "reverse": diffrax.RecursiveCheckpointAdjoint()}
+        if mode not in adjoints:
+            raise ParameterError(f"objective window_gradient {mode!r} is unknown; valid: 'forward', 'reverse'")
+        values["window_adjoint"] = adjoints[mode]
+    kinds = {"ensemble": Ensemble, "pathwise": Pathwise}
+    return kinds[kind](**_fields(kinds[kind], "objective", values))
+
+
+def objective_config(objective: AbstractObjective) -> dict:
+    """The ``[objective]`` table of ``objective`` (:func:`objective_from_config` reads it back)."""
+    d = objective.describe()
+    out = {"method": d.pop("kind")}
+    if "window_adjoint" in d:
+        out["window_gradient"] = d.pop("window_adjoint")
+    out["on_failure"] = "raise" if d.pop("throw") else "nan"
+    if "trend" in d:  # the steady-state objective's trend estimate: an [objective.trend] table
+        d["trend"] = None if objective.trend is None else objective_config(objective.trend)
+    return {**out, **d}
+
+
+def settings_from_config(section: dict) -> Settings:
+    """:class:`optim.optimize.Settings` of an ``[optimizer]`` table: ``method`` (a name of
+    :data:`optim.optimizers.OPTIMIZERS`, default "adam") with its settings, then the
+    Settings fields."""
+    values = dict(section)
+    method = values.pop("method", "adam")
+    accepted = OPTIMIZERS[method][1] if method in OPTIMIZERS else ()
+    optimizer = from_settings(method, **{k: values.pop(k) for k in list(values) if k in accepted})
+    valid = {f.name for f in dataclasses.fields(Settings)} - {"optimizer", "guard"}
+    bad = set(values) - valid
+    if bad:
+        raise ParameterError(
+            f"unknown [optimizer] keys {sorted(bad)} for method {method!r}; valid: method, "
+            f"{', '.join(accepted)}, {', '.join(sorted(valid))}"
+        )
+    return Settings(optimizer=optimizer, **values)
+
+
+def settings_config(settings: Settings) -> dict:
+    """The ``[optimizer]`` table of ``settings`` (:func:`settings_from_config` reads it back)."""
+    plain = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)}
+    plain.pop("optimizer"), plain.pop("guard")
+    plain = {k: v for k, v in plain.items() if v is not None}
+    return {**settings.optimizer.settings(), **plain}
 
 
 def resolved(problem: Problem, settings: Settings, name: str) -> dict:
     return {
         "problem": name,
-        "optimizer": dataclasses.asdict(settings),
-        "objective": {f.name: getattr(problem.objective, f.name) for f in dataclasses.fields(problem.objective)},
+        "optimizer": settings_config(settings),
+        "objective": objective_config(problem.objective),
         "design": {
             "names": list(problem.names),
             "lower": list(problem.lower),
@@ -203,19 +282,27 @@ def resolved(problem: Problem, settings: Settings, name: str) -> dict:
             "b": list(problem.b),
             "cost_weight": problem.cost_weight,
             "cost_reference": problem.cost_reference,
-            "scatter": [list(e) for e in problem.scatter],
-            "samples": problem.samples,
-            "seed": problem.seed,
-            **_design_fields(problem),
+            **_subclass_fields(problem),
         },
         "mechanism": mech_config.to_dict(problem.base),
     }
 
 
-def _design_fields(problem: Problem) -> dict:
-    """The fields a :class:`~optim.design.DesignProblem` adds to :class:`Problem`."""
+def _subclass_fields(problem: Problem) -> dict:
+    """The fields a problem class adds to :class:`~optim.problem.AbstractProblem`."""
     extra = [f.name for f in dataclasses.fields(problem) if f.name not in {g.name for g in dataclasses.fields(Problem)}]
-    return {k: ([list(e) for e in getattr(problem, k)] if k == "weights" else getattr(problem, k)) for k in extra}
+    return {
+        k: ([list(e) for e in getattr(problem, k)] if k in ("weights", "scatter") else getattr(problem, k))
+        for k in extra
+    }
+
+
+def _regime(problem: Problem, x) -> dict:
+    """The steady-state regime of SI design ``x`` (:func:`optim.steady.report`)."""
+    from .steady import Steady, report
+
+    objective = problem.objective if isinstance(problem.objective, Steady) else Steady(throw=False)
+    return report(objective.solve(problem.mechanism(x)))
 
 
 def _drop_none(d):
@@ -285,7 +372,7 @@ def run(args) -> int:
     result = {
         "problem": problem.description,
         "names": list(problem.names),
-        "method": settings.method,
+        "method": settings.optimizer.label,
         "converged": res["converged"] is not None,
         "stop_reason": res["converged"] or f"iteration limit: max_iterations = {settings.max_iterations}",
         "iterations": len(hist),
@@ -299,6 +386,7 @@ def run(args) -> int:
         "starts": settings.starts,
         **({"start_runs": res["runs"], "best_start": res["best_start"]} if "runs" in res else {}),
         **({"grid": grid_info} if grid_info else {}),
+        "final_regime": _regime(problem, res["final"]) if args.regime else None,
         "paper": {
             "optimum_deg": PAPER_OPTIMUM_DEG,
             "reduction_percent": PAPER_REDUCTION_PCT,

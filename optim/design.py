@@ -1,6 +1,6 @@
 """Many-variable design problems with nonlinear constraints held at every iterate.
 
-A :class:`DesignProblem` is a :class:`~optim.problem.Problem` whose geometry is
+A :class:`DesignProblem` is a problem (:class:`~optim.problem.AbstractProblem`) whose geometry is
 reparametrised so that the mechanism-design constraints become bounds of the
 design box, which the optimiser's projection (and any box-bounded baseline)
 already keeps:
@@ -34,7 +34,7 @@ Bounding the ratio keeps J2 physically consistent with the rod's mass and length
 Objective (degrees, the Eq. 19 unit): Eq. 19 plus weighted terms from the same
 simulation, ``sum_i w_i m_i + cost``, the metrics ``m_i`` in :data:`TERMS` and
 the weights ``w_i`` in degrees per metric unit, plus the reciprocal clearance
-cost of :meth:`Problem.cost`. All terms are RMS values over the evaluation window
+cost of :meth:`~optim.problem.AbstractProblem.cost`. All terms are RMS values over the evaluation window
 (time averages of squares), so the ensemble gradient applies to each (the windows'
 sums of squares come from :func:`optim.sensitivity.window_sums`).
 """
@@ -48,15 +48,13 @@ from collections.abc import Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
 
-from jaxcrank.analysis.metrics import RMS_METRICS, by_name
-from jaxcrank.analysis.metrics import stack as metrics_stack
-from jaxcrank.numerics.estimators import straight_through
 from jaxcrank.physics.params import ParameterError, get_parameter, paper, set_parameters
 
-from .objective import Objective, over_windows, stored_solve, tracked_solve, window_starts, windows_ok
-from .problem import Problem
-from .sensitivity import deviations, window_sums
+from .objective import EQ19, AbstractObjective, safe_sqrt
+from .problem import AbstractProblem
+from .steady import Steady
 
 #: design variables that are not mechanism fields (name -> SI unit)
 DERIVED = {"min_transmission_angle": "rad", "rod_inertia_ratio": "1"}
@@ -117,27 +115,23 @@ def geometry(l2, alpha, stroke, iterations: int = 64):
     return 0.5 * (a + d), 0.5 * (a - d)
 
 
-def _safe_sqrt(x):
-    pos = x > 0.0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
-
-
-def _terms(mean_squares):
-    """The :data:`TERMS` values, (5,), from the mean squares of the signals of
-    :data:`jaxcrank.analysis.metrics.RMS_METRICS`, a vector in that order
-    (:func:`optim.sensitivity.deviations`' columns), read by metric name."""
-    ms = by_name(RMS_METRICS, mean_squares)
-    terms = {k: ms[k] for k in TERMS if k in ms}
-    terms["rms_contact_force_N"] = 0.5 * (ms["rms_contact_force_B_N"] + ms["rms_contact_force_C_N"])
-    return _safe_sqrt(jnp.stack([terms[k] for k in TERMS]))
+def terms(rms: dict) -> dict[str, Float[Array, ""]]:
+    """The :data:`TERMS` (name -> value in the unit of its name) from the RMS metrics of
+    an objective (:meth:`optim.objective.AbstractObjective.rms`), by name: the contact
+    force term is the RMS over both joints, ``sqrt((F_B^2 + F_C^2) / 2)``."""
+    out = {k: rms[k] for k in TERMS if k != "rms_contact_force_N"}
+    out["rms_contact_force_N"] = safe_sqrt(
+        0.5 * (rms["rms_contact_force_B_N"] ** 2 + rms["rms_contact_force_C_N"] ** 2)
+    )
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
-class DesignProblem(Problem):
-    """A :class:`Problem` over a reparametrised geometry with the stroke, transmission
-    and assembly constraints built into its box (module docstring).
+class DesignProblem(AbstractProblem):
+    """A problem over a reparametrised geometry with the stroke, transmission and
+    assembly constraints built into its box (module docstring).
 
-    Attributes (besides :class:`Problem`'s):
+    Attributes (besides :class:`~optim.problem.AbstractProblem`'s):
         stroke: target ideal slider stroke, m (held exactly by the reparametrisation;
             the tolerance band below is what the tests and reports check).
         stroke_tolerance: allowed stroke error, m (0.1 mm).
@@ -159,26 +153,22 @@ class DesignProblem(Problem):
     min_transmission_deg: float = 40.0
     weights: tuple[tuple[str, float], ...] = ()
 
-    def __post_init__(self):
-        n = len(self.names)
-        if len(self.lower) != n or len(self.upper) != n:
-            raise ParameterError(f"lower and upper need {n} values (one per variable {list(self.names)})")
-        for name, lo, hi in zip(self.names, self.lower, self.upper):
-            if not lo < hi:
-                raise ParameterError(f"bounds of {name!r}: lower = {lo:g} must be below upper = {hi:g}")
-            if name not in DERIVED:
-                get_parameter(self.base, name)  # raises on unknown names
+    def check_variable(self, name: str) -> None:
+        if name in ("crank_length", "offset", "crank_speed"):
+            raise ParameterError(
+                f"{name!r} cannot be a DesignProblem variable: crank_length and offset "
+                "follow from the stroke (the geometry's variables are rod_length and min_transmission_angle), "
+                "crank_speed fixes the objective's sample grid"
+            )
+        if name not in DERIVED:
+            get_parameter(self.base, name)  # raises on unknown names
+
+    def check(self) -> None:
         for req in ("rod_length", "min_transmission_angle"):
             if req not in self.names:
                 raise ParameterError(
                     f"a DesignProblem needs the variable {req!r} (its geometry is "
                     "parametrised by rod_length and min_transmission_angle)"
-                )
-        for bad in ("crank_length", "offset", "crank_speed"):
-            if bad in self.names:
-                raise ParameterError(
-                    f"{bad!r} cannot be a DesignProblem variable: crank_length and offset "
-                    "follow from the stroke, crank_speed fixes the objective's sample grid"
                 )
         if "rod_inertia" in self.names and "rod_inertia_ratio" in self.names:
             raise ParameterError("give rod_inertia or rod_inertia_ratio, not both")
@@ -201,20 +191,8 @@ class DesignProblem(Problem):
                 f"min_transmission_angle = {hi_a:g} rad (largest stroke 2 L2 cos(alpha) = {reach:g} m); "
                 "valid: raise the lower rod_length or lower the upper min_transmission_angle"
             )
-        if len(self.A) != len(self.b) or any(len(row) != n for row in self.A):
-            raise ParameterError(
-                f"constraints: A must be (m, {n}) and b (m,), got {len(self.A)} rows, {len(self.b)} bounds"
-            )
-        if self.cost_weight < 0:
-            raise ParameterError(f"cost_weight = {self.cost_weight:g} must be >= 0")
-        if self.cost_weight > 0 and not any(nm.startswith("clearance_") for nm in self.names):
-            raise ParameterError("cost_weight > 0 needs clearance_B or clearance_C among the variables")
-        if self.start is not None and len(self.start) != n:
-            raise ParameterError(f"start needs {n} values")
-        if self.samples or self.scatter:
-            raise ParameterError("a DesignProblem has no manufacturing scatter (samples = 0, scatter = ())")
         for entry in self.weights:
-            if len(entry) != 2 or entry[0] not in TERMS or entry[0] == "rms_transmission_angle_error_deg":
+            if len(entry) != 2 or entry[0] not in TERMS or entry[0] == EQ19:
                 raise ParameterError(
                     f"weights entry {entry!r} must be (term, weight) with term one of {list(TERMS)[1:]}"
                 )
@@ -223,11 +201,15 @@ class DesignProblem(Problem):
         if len({e[0] for e in self.weights}) != len(self.weights):
             raise ParameterError("weights names a term twice")
 
+    @property
+    def description(self) -> str:
+        return self.title
+
     # ------------------------------------------------------------------ model
-    def weight_vector(self):
-        """Weights of the :data:`TERMS`, (5,), degrees per unit of each term."""
+    def weight_of(self) -> dict[str, float]:
+        """Weight of each of the :data:`TERMS`, degrees per unit of the term (Eq. 19: 1)."""
         w = dict(self.weights)
-        return jnp.asarray([1.0] + [float(w.get(t, 0.0)) for t in list(TERMS)[1:]])
+        return {t: 1.0 if t == EQ19 else float(w.get(t, 0.0)) for t in TERMS}
 
     def _get(self, x, name, default):
         return x[self.names.index(name)] if name in self.names else default
@@ -253,16 +235,11 @@ class DesignProblem(Problem):
         names, values = self.physical(x)
         return set_parameters(self.base, names, values)
 
-    def start_unit(self):
-        x0 = (
-            self.start
-            if self.start is not None
-            else [
-                0.5 * (lo + hi) if nm in DERIVED else get_parameter(self.base, nm)
-                for nm, lo, hi in zip(self.names, self.lower, self.upper)
-            ]
-        )
-        return self.project(self.to_unit(x0))
+    def default_start(self) -> list[float]:
+        return [
+            0.5 * (lo + hi) if nm in DERIVED else float(get_parameter(self.base, nm))
+            for nm, lo, hi in zip(self.names, self.lower, self.upper)
+        ]
 
     def constraints(self, x) -> dict:
         """The nonlinear constraints at SI design(s) ``x`` (..., n), numpy: ``stroke_m``,
@@ -290,7 +267,7 @@ class DesignProblem(Problem):
     def feasible(self, x, tol=1e-12):
         """Bounds, linear constraints and the nonlinear constraints (stroke within
         ``stroke_tolerance``, minimum transmission angle, assemblability)."""
-        ok = super().feasible(x, tol)
+        ok = self.box_feasible(x, tol)
         c = self.constraints(x)
         return (
             ok
@@ -300,47 +277,17 @@ class DesignProblem(Problem):
         )
 
     # ------------------------------------------------------------------ objective
-    def terms(self, x, throw: bool = True):
-        """:data:`TERMS` values at SI design ``x`` from one solve from the
-        pins-centred start (pathwise, differentiable on short windows), (5,), and
-        whether the solve succeeded (``throw=False``: failures reported, not raised)."""
-        obj = self.objective
-        grid = obj.grid(self.base)
-        sim, n_start = stored_solve(self.mechanism(x), obj, throw, grid)
-        late = slice(n_start + 1, None)
-        vals = _terms(jnp.mean(deviations(sim.mechanism, sim.ts[late], sim.ys[late]) ** 2, axis=0))
-        return vals, sim.ok & jnp.all(jnp.isfinite(vals))
+    def terms(self, x) -> dict[str, Float[Array, ""]]:
+        """:data:`TERMS` at SI design ``x`` by the problem's objective (name -> value)."""
+        return terms(self.objective.rms(self.mechanism(x)))
 
-    def objective_value(self, x, method: str | None = None):
-        """Total objective at SI design ``x``, degrees: ``sum_i w_i term_i + cost``.
+    def loss(self, rms: dict) -> Float[Array, ""]:
+        w = self.weight_of()
+        t = terms(rms)
+        return sum(w[k] * t[k] for k in TERMS)
 
-        ``method`` (default ``objective.method``): ``"pathwise"`` differentiates the
-        one solve; ``"ensemble"`` has the same value and the ensemble-sensitivity
-        gradient of :meth:`ensemble_terms`."""
-        method = self.objective.method if method is None else method
-        vals = self.terms(x)[0] if method == "pathwise" else self.ensemble_terms(x)
-        return jnp.dot(self.weight_vector(), vals) + self.cost(x)
-
-    def ensemble_terms(self, x):
-        """:data:`TERMS` at SI design ``x``, (5,): the exact values of one solve, whose
-        gradient is the ensemble-sensitivity estimate: the windows' sums of squares of
-        every term's quantity (:func:`optim.sensitivity.window_sums`), differentiated
-        with respect to the design, one after another, their ensemble mean giving each
-        term's gradient (first order: no second derivatives)."""
-        obj = self.objective
-        grid = obj.grid(self.base)
-        _, _, n_window, dt = grid
-        sg = jax.lax.stop_gradient
-        # the exact terms tracked during one solve that stores only the windows' starts
-        sim = tracked_solve(sg(self.mechanism(x)), obj, obj.on_failure == "raise", grid)
-        exact = _terms(metrics_stack(RMS_METRICS, sim.metrics) ** 2)
-        exact = jnp.where(sim.ok, exact, jnp.nan)
-        starts = window_starts(sim)
-        names, values = self.physical(x)
-        sums, ok = over_windows(lambda i: window_sums(self.base, names, values, starts, i, n_window, dt, obj), starts)
-        n_ok = windows_ok(ok, obj)
-        surrogate = _terms(jnp.sum(ok[:, None].astype(sums.dtype) * sums, axis=0) / (n_window * n_ok))
-        return straight_through(exact, surrogate)
+    def objective_value(self, x):
+        return self.loss(self.objective.rms(self.mechanism(x))) + self.cost(x)
 
 
 #: the design preset's variables: (name, lower, upper, start), SI
@@ -365,7 +312,7 @@ DESIGN_WEIGHTS = (
 
 
 def design_problem(
-    objective: Objective = Objective(),
+    objective: AbstractObjective | None = None,
     cost_weight: float = 0.005,
     start: Sequence[float] | None = None,
     variables: Sequence[str] | None = None,
@@ -379,8 +326,9 @@ def design_problem(
     is 1/12), slider mass 1-2.5 kg, the bearings' friction coefficient 0.02-0.15
     (lubricated to dry steel) and the rod bearings' Young's modulus 100-210 GPa
     (bronze to steel bushings). Minimises Eq. 19 + :data:`DESIGN_WEIGHTS` terms +
-    cost. ``variables``: a subset of the names (the others stay at their start
-    values, folded into the base mechanism)."""
+    cost. ``objective``: default the steady state (:class:`optim.steady.Steady`, the
+    terms over one period of the periodic orbit). ``variables``: a subset of the names
+    (the others stay at their start values, folded into the base mechanism)."""
     chosen = [v for v in DESIGN_VARIABLES if variables is None or v[0] in variables]
     base = paper()
     fixed = [v for v in DESIGN_VARIABLES if v not in chosen]
@@ -398,7 +346,7 @@ def design_problem(
         lower=tuple(v[1] for v in chosen),
         upper=tuple(v[2] for v in chosen),
         start=tuple(v[3] for v in chosen) if start is None else tuple(start),
-        objective=objective,
+        objective=Steady() if objective is None else objective,
         cost_weight=cost_weight if has_clearance else 0.0,
         cost_reference=5e-4,
         title=f"design: {len(chosen)} variables, stroke 240 mm, transmission >= 40 deg",

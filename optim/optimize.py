@@ -1,16 +1,12 @@
-"""optax optimisation of a :class:`~optim.problem.Problem`, with a checkpoint
-after every iteration.
+"""Optimisation of a problem (:class:`~optim.problem.AbstractProblem`) with an
+optimiser Module (:mod:`optim.optimizers`), with a checkpoint after every iteration.
 
 The optimiser works on the scaled design ``u`` in the unit box and on the
 objective divided by its value at the start, so step sizes mean the same for any
-problem. Feasibility:
-
-- ``adam``: projected gradient steps, ``u <- P(u + adam_update)`` with
-  :meth:`Problem.project` (optax projections).
-- ``lbfgs``: ``optax.lbfgs`` with its zoom line search on the objective extended
-  beyond the feasible set by ``f(P(u)) + penalty * |u - P(u)|^2`` (continuous,
-  equal to f inside), and the iterate projected after each step (a no-op when
-  the line search stays inside).
+problem. Feasibility: every iterate is projected onto the feasible set
+(:meth:`~optim.problem.AbstractProblem.project`, optax projections). An optional
+regime guard (``Settings.guard``, :class:`optim.steady.RegimeGuard`) halves a step
+whose design it refuses (a step that leaves the periodic regime), or holds the iterate.
 
 Convergence: the projected-gradient step ``|P(u - g) - u|_inf`` (g the scaled
 gradient) below ``gtol``, or the design moving less than ``xtol`` (scaled) for
@@ -22,18 +18,15 @@ are replaced atomically (temporary file and rename) after every iteration;
 most the iteration in progress and, being deterministic, reproduces the uninterrupted
 history (``tests/test_faults.py`` kills runs with SIGKILL). A truncated or corrupted
 checkpoint raises :class:`jaxcrank.CorruptFileError` naming the file; it is never
-silently replaced by a fresh start.
+silently replaced by a fresh start (:mod:`optim.checkpoint`).
 """
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import functools
 import json
 import time
-import zipfile
-import zlib
 from pathlib import Path
 
 import jax
@@ -47,10 +40,11 @@ from jaxcrank.errors import CorruptFileError
 from jaxcrank.numerics.solve import SimulationError
 from jaxcrank.physics.params import ParameterError
 
-from .objective import forward_mode, value_and_grad
-from .problem import Problem
-
-METHODS = ("adam", "lbfgs")
+from . import checkpoint
+from .objective import value_and_grad
+from .optimizers import AbstractOptimizer, Projected, adam
+from .problem import AbstractProblem
+from .steady import Steady, SteadyEvaluator
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,52 +52,46 @@ class Settings:
     """Optimiser settings (scaled units: the design in [0, 1]^n, the objective / its start value).
 
     Attributes:
-        method: ``"adam"`` or ``"lbfgs"``.
-        max_iterations: iteration budget.
-        learning_rate: Adam step size (scaled design units per iteration).
+        optimizer: the optimiser (:mod:`optim.optimizers`: ``adam(0.1)`` by default,
+            ``Projected(any optax transformation)`` or ``LBFGS()``).
+        max_iterations: iteration budget, >= 1.
         gtol: stop when the projected-gradient step is below this.
         xtol: stop when the design moves less than this ``patience`` times in a row.
-        penalty: L-BFGS's out-of-set penalty weight.
-        max_linesearch_steps: L-BFGS line-search budget per iteration.
+        patience: see ``xtol``.
         starts: designs to optimise from (:func:`multistart`): the problem's start, then
             ``starts - 1`` scrambled Sobol points of the box; 1 runs :func:`optimize` alone.
         seed: seed of those Sobol points.
+        max_seconds: wall-time budget of one :func:`optimize` call, s (None: none); the
+            run stops after the iteration that passes it.
+        guard: optional regime guard (:class:`optim.steady.RegimeGuard`): a step to a
+            design it refuses is halved until accepted (at most ``guard.max_halvings``
+            times, then the iterate is held).
     """
 
-    method: str = "adam"
+    optimizer: AbstractOptimizer = dataclasses.field(default_factory=adam)
     max_iterations: int = 30
-    learning_rate: float = 0.1
     gtol: float = 1e-3
     xtol: float = 1e-3
     patience: int = 3
-    penalty: float = 10.0
-    max_linesearch_steps: int = 6
     starts: int = 1
     seed: int = 0
+    max_seconds: float | None = None
+    guard: object = None
 
     def __post_init__(self):
-        from jaxcrank.physics.params import ParameterError
-
-        if self.method not in METHODS:
-            raise ParameterError(f"optimiser method {self.method!r} is unknown; valid: {', '.join(METHODS)}")
-        if self.max_iterations < 1 or self.learning_rate <= 0 or self.gtol < 0 or self.xtol < 0:
-            raise ParameterError("max_iterations must be >= 1, learning_rate > 0, gtol and xtol >= 0")
+        if not isinstance(self.optimizer, AbstractOptimizer):
+            raise ParameterError(
+                f"optimizer = {self.optimizer!r} must be an optim.optimizers.AbstractOptimizer "
+                "(adam(...), Projected(optax transformation) or LBFGS())"
+            )
+        if self.max_iterations < 1 or self.gtol < 0 or self.xtol < 0:
+            raise ParameterError("max_iterations must be >= 1, gtol and xtol >= 0")
         if not (isinstance(self.starts, int) and self.starts >= 1):
             raise ParameterError(f"starts = {self.starts!r} must be an integer >= 1")
 
 
-def _optimizer(settings: Settings):
-    if settings.method == "adam":
-        return optax.adam(settings.learning_rate)
-    return optax.lbfgs(
-        linesearch=optax.scale_by_zoom_linesearch(
-            max_linesearch_steps=settings.max_linesearch_steps, initial_guess_strategy="one"
-        )
-    )
-
-
 @functools.lru_cache(maxsize=8)
-def programs(problem: Problem, penalty: float = 10.0):
+def programs(problem: AbstractProblem, penalty: float = 10.0):
     """The optimiser's compiled programs of ``problem``, on the scaled design ``u``
     (n,) with the objective divided by ``f0`` (an argument, so a resumed or repeated
     run reuses them; pass 1.0 for degrees).
@@ -118,10 +106,10 @@ def programs(problem: Problem, penalty: float = 10.0):
     same for L-BFGS's extension beyond it, ``extended(u, f0) -> (value, grad (n,))``. Each is traced and
     compiled at its first call, or loaded from :mod:`jaxcrank.runs.cache` when that is
     enabled and an earlier process stored it. A failed evaluation is NaN
-    (``Objective.on_failure = "nan"`` and :func:`jaxcrank.runs.cache.checks_as_nan`: no
+    (the objective with ``throw=False`` and :func:`jaxcrank.runs.cache.checks_as_nan`: no
     host callback in the programs, so they can be cached); :func:`optimize` checks.
     """
-    problem = dataclasses.replace(problem, objective=dataclasses.replace(problem.objective, on_failure="nan"))
+    problem = problem.with_objective(dataclasses.replace(problem.objective, throw=False))
 
     def inside(u, f0):
         return problem.objective_value(problem.from_unit(u)) / f0
@@ -131,44 +119,12 @@ def programs(problem: Problem, penalty: float = 10.0):
         return inside(p, f0) + penalty * jnp.sum((u - p) ** 2)
 
     args = (jax.ShapeDtypeStruct((problem.n,), jnp.float64), jax.ShapeDtypeStruct((), jnp.float64))
-    vg = value_and_grad(inside, forward_mode(problem.objective))
-    vg_outside = value_and_grad(outside, forward_mode(problem.objective))
+    vg = value_and_grad(inside, problem.objective.forward_mode())
+    vg_outside = value_and_grad(outside, problem.objective.forward_mode())
     return (
         _Lazy(lambda: cache.exported(vg, ("optim.value_and_grad", problem), *args)),
         _Lazy(lambda: cache.exported(vg_outside, ("optim.extended_value_and_grad", problem, penalty), *args)),
     )
-
-
-@functools.lru_cache(maxsize=8)
-def _lbfgs_update(settings: Settings, extended):
-    """L-BFGS's update step ``(grad, state, u, value, f0) -> (updates, state)`` for the
-    extension program ``extended`` (:func:`programs`), jitted once per program and
-    settings: optax's zoom line search traces the objective inside a while loop, which
-    compiled eagerly would compile the whole objective again at every iteration.
-
-    The line search differentiates its function with ``jax.value_and_grad``; the
-    gradient comes from ``extended`` itself (forward or reverse mode, as the objective
-    says) through a custom VJP, so a forward-mode objective works there too."""
-    opt = _optimizer(settings)
-
-    @jax.custom_vjp
-    def line(u, f0):
-        return extended(u, f0)[0]
-
-    def forward(u, f0):
-        value, grad = extended(u, f0)
-        return value, grad
-
-    def backward(grad, cotangent):
-        return cotangent * grad, jnp.zeros(())
-
-    line.defvjp(forward, backward)
-
-    @jax.jit
-    def update(grad, state, u, value, f0):
-        return opt.update(grad, state, u, value=value, grad=grad, value_fn=lambda v: line(v, f0))
-
-    return update
 
 
 class _Lazy:
@@ -199,7 +155,7 @@ def _strong(args):
     ]
 
 
-def _checked(problem: Problem, u, value, grad):
+def _checked(problem: AbstractProblem, u, value, grad):
     """``value, grad``, or SimulationError naming the design where they are not finite."""
     if np.isfinite(float(value)) and np.all(np.isfinite(np.asarray(grad))):
         return value, grad
@@ -211,38 +167,8 @@ def _checked(problem: Problem, u, value, grad):
     )
 
 
-def _flatten(state):
-    leaves = jax.tree.leaves(state)
-    return {f"leaf{i}": np.asarray(x) for i, x in enumerate(leaves)}
-
-
-def _unflatten(template, arrays):
-    leaves, treedef = jax.tree.flatten(template)
-    return jax.tree.unflatten(
-        treedef, [jnp.asarray(arrays[f"leaf{i}"], dtype=np.asarray(x).dtype) for i, x in enumerate(leaves)]
-    )
-
-
-def history_columns(problem: Problem):
-    return (
-        ["iteration", "objective_deg", "rms_error_deg", "cost_deg"]
-        + [f"grad_{n}_deg_per_SI" for n in problem.names]
-        + [f"{n}_SI" for n in problem.names]
-        + ["projected_gradient", "step", "seconds"]
-    )
-
-
-def _write_history(path: Path, problem: Problem, history):
-    cols = history_columns(problem)
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols)
-        w.writeheader()
-        for h in history:
-            w.writerow({c: h[c] for c in cols})
-
-
 def optimize(
-    problem: Problem,
+    problem: AbstractProblem,
     settings: Settings = Settings(),
     out: Path | None = None,
     resume: bool = False,
@@ -257,30 +183,43 @@ def optimize(
         stop_after: stop (as if killed) after this many iterations of this call (tests).
 
     Returns a dict: ``history`` (one dict per iteration, columns of
-    :func:`history_columns`), ``converged`` (reason or None), ``f0`` (objective at the
+    :func:`optim.checkpoint.history_columns`), ``converged`` (reason or None), ``f0`` (objective at the
     start, degrees), ``final`` (the best SI design of the history), ``final_objective``
     (its objective, degrees) and ``last`` (the last iterate, SI).
     """
-    opt = _optimizer(settings)
+    opt = settings.optimizer
+    penalty = getattr(opt, "penalty", 10.0)
     # the start is not part of the compiled programs: runs from other starts share them
-    vg, extended = programs(dataclasses.replace(problem, start=None), settings.penalty)
+    if isinstance(problem.objective, Steady):
+        # evaluated on the host, warm-started from the last orbit (not one compiled program)
+        if not isinstance(opt, Projected):
+            raise ParameterError("the steady-state objective needs a projected optimiser (e.g. adam()), not L-BFGS")
+        evaluator = SteadyEvaluator(problem)
+        vg, extended = _steady_programs(problem, evaluator), None
+    else:
+        if settings.guard is not None:
+            raise ParameterError(
+                "Settings.guard (the regime guard) needs the steady-state objective (optim.steady.Steady)"
+            )
+        evaluator = None
+        vg, extended = programs(dataclasses.replace(problem, start=None), penalty)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"
     if resume:
         if ckpt is None or not ckpt.exists():
             raise ParameterError(f"--resume: no checkpoint at {ckpt}; run without --resume first")
-        u, leaves, meta = load_checkpoint(Path(out))
-        if meta["names"] != list(problem.names) or meta["method"] != settings.method:
+        u, leaves, meta = checkpoint.load(Path(out))
+        if meta["names"] != list(problem.names) or meta["method"] != opt.label:
             raise ParameterError(
                 f"--resume: the checkpoint in {out} is for {meta['names']} with "
-                f"{meta['method']}, not {list(problem.names)} with {settings.method}: resume "
+                f"{meta['method']}, not {list(problem.names)} with {opt.label}: resume "
                 "with the run's own settings (optimize.toml) or choose another --out"
             )
         f0, history = meta["f0"], meta["history"]
         try:
-            state = _unflatten(opt.init(u), leaves)
+            state = checkpoint.unflatten(opt.init(u), leaves)
         except (KeyError, ValueError, TypeError) as err:
             raise CorruptFileError(
-                f"{ckpt}: the optimiser state does not fit {settings.method} ({err}); the checkpoint is corrupted"
+                f"{ckpt}: the optimiser state does not fit {opt.label} ({err}); the checkpoint is corrupted"
             ) from None
         quiet, converged = meta["quiet"], meta["converged"]
     else:
@@ -291,11 +230,9 @@ def optimize(
         first = (first[0] / f0, first[1] / f0)
         state, history, quiet, converged = opt.init(u), [], 0, None
 
-    done_here = 0
+    done_here, started = 0, time.perf_counter()
     start_it = len(history)
-    bar = tqdm(
-        total=settings.max_iterations, initial=start_it, desc=f"{settings.method}", unit="it", disable=not progress
-    )
+    bar = tqdm(total=settings.max_iterations, initial=start_it, desc=opt.label, unit="it", disable=not progress)
     while converged is None and len(history) < settings.max_iterations:
         tic = time.perf_counter()
         if not history and not resume:
@@ -304,11 +241,10 @@ def optimize(
             value, grad = _checked(problem, u, *vg(u, f0))
         x = problem.from_unit(u)
         proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
-        if settings.method == "adam":
-            updates, state = opt.update(grad, state, u)
-        else:
-            updates, state = _lbfgs_update(settings, extended)(grad, state, u, value, jnp.asarray(f0, jnp.float64))
+        updates, state = opt.update(grad, state, u, value, f0, extended)
         u_new = problem.project(optax.apply_updates(u, updates))
+        u_new, halvings = _guarded(problem, settings.guard, evaluator, u, u_new)
+        regime = evaluator.last_report if evaluator is not None else {}
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))
         grad_si = np.asarray(grad) * f0 / np.asarray(problem.span)
@@ -321,6 +257,9 @@ def optimize(
             **{f"{n}_SI": float(v) for n, v in zip(problem.names, np.asarray(x))},
             "projected_gradient": proj_step,
             "step": step,
+            "halvings": halvings,
+            "regime": regime.get("regime", ""),
+            "leading_multiplier": regime.get("leading_multiplier"),
             "seconds": time.perf_counter() - tic,
         }
         history.append(rec)
@@ -334,9 +273,11 @@ def optimize(
         bar.update(1)
         bar.set_postfix(objective=f"{rec['objective_deg']:.5f}", step=f"{step:.3g}")
         if out is not None:
-            _checkpoint(Path(out), problem, settings, u, state, history, f0, quiet, converged)
+            checkpoint.save(Path(out), problem, settings, u, state, history, f0, quiet, converged)
         done_here += 1
         if stop_after is not None and done_here >= stop_after:
+            break
+        if settings.max_seconds is not None and time.perf_counter() - started > settings.max_seconds:
             break
     bar.close()
     best = min(history, key=lambda h: h["objective_deg"])
@@ -350,7 +291,30 @@ def optimize(
     }
 
 
-def start_points(problem: Problem, count: int, seed: int = 0) -> np.ndarray:
+def _steady_programs(problem: AbstractProblem, evaluator: SteadyEvaluator):
+    """The steady-state objective's ``value_and_grad(u, f0)`` on the scaled design, as
+    :func:`programs` gives for the windowed objectives (NaN where the solve failed)."""
+
+    def vg(u, f0):
+        value, grad, _ = evaluator.value_and_grad(np.asarray(problem.from_unit(jnp.asarray(u))))
+        return jnp.asarray(value / f0), jnp.asarray(grad * np.asarray(problem.span) / f0)
+
+    return vg
+
+
+def _guarded(problem: AbstractProblem, guard, evaluator, u, u_new):
+    """``u_new``, or the step from ``u`` halved until ``guard`` accepts its design (at
+    most ``guard.max_halvings`` times; then ``u`` is held), and the number of halvings."""
+    if guard is None:
+        return u_new, 0
+    for k in range(guard.max_halvings + 1):
+        if guard.accept(evaluator, np.asarray(problem.from_unit(u_new))):
+            return u_new, k
+        u_new = u + 0.5 * (u_new - u)
+    return u, guard.max_halvings + 1
+
+
+def start_points(problem: AbstractProblem, count: int, seed: int = 0) -> np.ndarray:
     """``count`` scaled start designs, shape (count, n): the problem's own start
     (:meth:`Problem.start_unit`), then scrambled Sobol points of the unit box (``seed``)
     projected onto the feasible set (:meth:`Problem.project`).
@@ -375,7 +339,7 @@ def start_points(problem: Problem, count: int, seed: int = 0) -> np.ndarray:
 
 
 def multistart(
-    problem: Problem,
+    problem: AbstractProblem,
     settings: Settings = Settings(),
     out: Path | None = None,
     resume: bool = False,
@@ -446,61 +410,3 @@ def multistart(
         record(runs)
     best = int(np.argmin([r["final_objective"] for r in runs]))
     return {**results[best], "runs": runs, "best_start": best}
-
-
-def _checkpoint(out: Path, problem, settings, u, state, history, f0, quiet, converged):
-    """One atomic file holds everything a resume needs; history.csv is a copy for people."""
-    out.mkdir(parents=True, exist_ok=True)
-    meta = {
-        "names": list(problem.names),
-        "method": settings.method,
-        "f0": f0,
-        "quiet": quiet,
-        "converged": converged,
-        "history": history,
-    }
-    arrays = {
-        "u": np.asarray(u),
-        "meta": np.asarray(json.dumps(meta)),
-        **{f"state_{k}": v for k, v in _flatten(state).items()},
-    }
-    tmp = out / "checkpoint.tmp.npz"
-    np.savez(tmp, **arrays)
-    tmp.replace(out / "checkpoint.npz")
-    tmp = out / "history.tmp.csv"
-    _write_history(tmp, problem, history)
-    tmp.replace(out / "history.csv")
-
-
-_META_KEYS = {"names", "method", "f0", "quiet", "converged", "history"}
-
-
-def load_checkpoint(out: Path):
-    """(u, optimiser-state leaves, meta dict) from ``out/checkpoint.npz``.
-
-    Raises:
-        FileNotFoundError: there is no checkpoint.
-        CorruptFileError: the file is truncated, corrupted or lacks an entry a
-            resume needs; the message names the file.
-    """
-    path = Path(out) / "checkpoint.npz"
-    if not path.exists():
-        raise FileNotFoundError(f"no checkpoint at {path}")
-    try:
-        with np.load(path) as arrays:
-            meta = json.loads(str(arrays["meta"]))
-            leaves = {k[6:]: np.asarray(arrays[k]) for k in arrays.files if k.startswith("state_")}
-            u = np.asarray(arrays["u"])
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as err:
-        raise CorruptFileError(
-            f"{path}: cannot be read ({type(err).__name__}: {err}); the run cannot be "
-            "resumed from it (move it away to start over)"
-        ) from None
-    missing = _META_KEYS - set(meta) if isinstance(meta, dict) else _META_KEYS
-    if missing or not isinstance(meta.get("history"), list) or len(meta["history"]) == 0:
-        raise CorruptFileError(
-            f"{path}: its metadata lacks {sorted(missing) or 'history'}; the checkpoint is corrupted"
-        )
-    if u.shape != (len(meta["names"]),) or not np.all(np.isfinite(u)):
-        raise CorruptFileError(f"{path}: the design u = {u} does not fit {meta['names']}; the checkpoint is corrupted")
-    return jnp.asarray(u), leaves, meta

@@ -1,6 +1,14 @@
 """Design problems: which parameters vary, within which bounds and linear
 constraints, and what is minimised.
 
+:class:`AbstractProblem` holds what every problem shares (variables, bounds, linear
+constraints, the objective instance, the cost term, the scaling and the projection);
+its final subclasses say how a design becomes a mechanism and how the objective's
+metrics become the problem's value: :class:`ParameterProblem` (mechanism parameters
+directly, Eq. 19, optionally averaged over manufactured parts) here, and
+:class:`optim.design.DesignProblem` (a reparametrised geometry with nonlinear
+constraints held by its box, weighted terms).
+
 Variables are scaled to the unit box, ``u = (x - lower) / (upper - lower)``, so
 millimetres and metres (or clearances and lengths) weigh the same for the
 optimiser. Feasibility is kept by Euclidean projection onto the scaled feasible
@@ -11,6 +19,7 @@ algorithm, exact for one active constraint and convergent in general).
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 from collections.abc import Sequence
 
@@ -23,23 +32,183 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from jaxcrank.physics.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
 from jaxcrank.runs.sampling import Tolerance, monte_carlo
 
-from .objective import Objective, forward_mode, value, value_and_grad
+from .objective import EQ19, AbstractObjective, Ensemble, value_and_grad
 
 
 @dataclasses.dataclass(frozen=True)
-class Problem:
+class AbstractProblem(abc.ABC):
     """A design problem ``min F(x) + cost(x)`` s.t. ``lower <= x <= upper``, ``A x <= b``.
 
     Attributes:
         base: the mechanism every design starts from (fixed parameters).
-        names: design variable names (see :func:`set_parameter`).
+        names: design variable names.
         lower, upper: bounds, SI units of each variable.
         A, b: linear inequality constraints ``A x <= b`` (SI), shape (m, n) and (m,).
-        start: start design, SI (default: ``base``'s values projected onto the set).
-        objective: settings of the Eq. 19 objective.
+        start: start design, SI (default: the subclass's default start projected onto the set).
+        objective: how the mechanism is measured (an :class:`optim.objective.AbstractObjective`).
         cost_weight: weight of the manufacturing-cost term, degrees (0: none).
         cost_reference: reference clearance of the cost term, m.
         title: a short description for plots and reports (see :attr:`description`).
+
+    Raises:
+        ParameterError: on construction, for inconsistent sizes, empty bounds, an
+            unknown variable, a negative cost weight or one without clearance variables.
+    """
+
+    base: Mechanism
+    names: tuple[str, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    A: tuple[tuple[float, ...], ...] = ()
+    b: tuple[float, ...] = ()
+    start: tuple[float, ...] | None = None
+    objective: AbstractObjective = Ensemble()
+    cost_weight: float = 0.0
+    cost_reference: float = 5e-4
+    title: str = ""
+
+    def __post_init__(self):
+        n = len(self.names)
+        if n == 0:
+            raise ParameterError("a design problem needs at least one variable")
+        if len(self.lower) != n or len(self.upper) != n:
+            raise ParameterError(f"lower and upper need {n} values (one per variable {list(self.names)})")
+        for name, lo, hi in zip(self.names, self.lower, self.upper):
+            if not lo < hi:
+                raise ParameterError(f"bounds of {name!r}: lower = {lo:g} must be below upper = {hi:g}")
+            self.check_variable(name)
+        if len(self.A) != len(self.b) or any(len(row) != n for row in self.A):
+            raise ParameterError(
+                f"constraints: A must be (m, {n}) and b (m,), got {len(self.A)} rows, {len(self.b)} bounds"
+            )
+        if not isinstance(self.objective, AbstractObjective):
+            raise ParameterError(
+                f"objective = {self.objective!r} must be an optim.objective.AbstractObjective "
+                "(Pathwise, Ensemble or optim.steady.Steady)"
+            )
+        if self.cost_weight < 0:
+            raise ParameterError(f"cost_weight = {self.cost_weight:g} must be >= 0")
+        if self.cost_weight > 0 and not any(nm.startswith("clearance_") for nm in self.names):
+            raise ParameterError("cost_weight > 0 needs clearance_B or clearance_C among the variables")
+        if self.start is not None and len(self.start) != n:
+            raise ParameterError(f"start needs {n} values")
+        self.check()
+
+    # ------------------------------------------------------------------ what a subclass says
+    @abc.abstractmethod
+    def check_variable(self, name: str) -> None:
+        """Raise ParameterError if ``name`` cannot be a variable of this problem."""
+
+    @abc.abstractmethod
+    def check(self) -> None:
+        """The subclass's own checks of its fields (ParameterError naming the field)."""
+
+    @abc.abstractmethod
+    def mechanism(self, x: Float[ArrayLike, " n"]) -> Mechanism:
+        """The mechanism at SI design ``x`` (traceable)."""
+
+    @abc.abstractmethod
+    def default_start(self) -> list[float]:
+        """The SI start design when ``start`` is None."""
+
+    @abc.abstractmethod
+    def loss(self, rms: dict) -> Float[Array, ""]:
+        """The problem's value (degrees, without the cost term) from the objective's RMS
+        metrics (:meth:`optim.objective.AbstractObjective.rms`)."""
+
+    @abc.abstractmethod
+    def objective_value(self, x: Float[ArrayLike, " n"]) -> Float[Array, ""]:
+        """Total objective at SI design ``x``, degrees: :meth:`loss` + :meth:`cost`.
+        Differentiate it with :meth:`value_and_grad`."""
+
+    @property
+    @abc.abstractmethod
+    def description(self) -> str:
+        """A description for reports and plots (from ``title``)."""
+
+    @abc.abstractmethod
+    def feasible(self, x: Float[ArrayLike, "*designs n"], tol=1e-12) -> Bool[ArrayLike, "*designs"]:
+        """Whether the SI design(s) ``x`` satisfy every constraint of the problem (numpy bool, batched)."""
+
+    # ------------------------------------------------------------------ shared
+
+    @property
+    def n(self) -> int:
+        """Number of design variables."""
+        return len(self.names)
+
+    @property
+    def span(self) -> Float[Array, " n"]:
+        """``upper - lower``, SI."""
+        return jnp.asarray(self.upper) - jnp.asarray(self.lower)
+
+    def to_unit(self, x: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
+        """SI design -> scaled design in the unit box."""
+        return (jnp.asarray(x, dtype=float) - jnp.asarray(self.lower)) / self.span
+
+    def from_unit(self, u: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
+        """Scaled design -> SI design."""
+        return jnp.asarray(self.lower) + jnp.asarray(u, dtype=float) * self.span
+
+    def box_feasible(self, x: Float[ArrayLike, "*designs n"], tol=1e-12) -> Bool[ArrayLike, "*designs"]:
+        """Whether the SI design ``x`` satisfies bounds and linear constraints (numpy bool, batched)."""
+        x = np.asarray(x, dtype=float)
+        ok = np.all((x >= np.asarray(self.lower) - tol) & (x <= np.asarray(self.upper) + tol), axis=-1)
+        for row, bound in zip(self.A, self.b):
+            ok &= x @ np.asarray(row) <= bound + tol
+        return ok
+
+    def project(self, u: Float[ArrayLike, " n"], iterations: int = 100) -> Float[Array, " n"]:
+        """Euclidean projection of the scaled design ``u`` onto the scaled feasible set."""
+        u = jnp.asarray(u, dtype=float)
+        box = lambda v: optax.projections.projection_box(v, 0.0, 1.0)  # noqa: E731
+        if not self.A:
+            return box(u)
+        lo, span = jnp.asarray(self.lower), self.span
+        rows = [(jnp.asarray(r) * span, bnd - jnp.dot(jnp.asarray(r), lo)) for r, bnd in zip(self.A, self.b)]
+        sets = [box] + [lambda v, a=a, c=c: optax.projections.projection_halfspace(v, a, c) for a, c in rows]
+
+        def sweep(carry, _):  # Dykstra's alternating projections with corrections
+            v, corr = carry
+            new = []
+            for proj, p in zip(sets, corr):
+                w = proj(v + p)
+                new.append(v + p - w)
+                v = w
+            return (v, tuple(new)), None
+
+        (v, _), _ = jax.lax.scan(sweep, (u, tuple(jnp.zeros_like(u) for _ in sets)), None, length=iterations)
+        return v
+
+    def start_unit(self) -> Float[Array, " n"]:
+        """Scaled, projected start design."""
+        x0 = self.start if self.start is not None else self.default_start()
+        return self.project(self.to_unit(x0))
+
+    def cost(self, x: Float[ArrayLike, " n"]) -> Float[Array, ""]:
+        """Manufacturing cost term, degrees: ``cost_weight * sum_j cost_reference / c_j``
+        over the clearance variables (reciprocal cost-tolerance model: halving a
+        clearance doubles its machining cost)."""
+        terms = [self.cost_reference / x[i] for i, nm in enumerate(self.names) if nm.startswith("clearance_")]
+        return self.cost_weight * sum(terms) if terms else jnp.zeros(())
+
+    def value_and_grad(self, x: Float[ArrayLike, " n"]) -> tuple[Float[Array, ""], Float[Array, " n"]]:
+        """The objective (degrees) at SI design ``x`` (n,) and its gradient (n,), degrees
+        per SI unit, by forward or reverse mode as the objective says. Traceable; ``jax.jit`` it."""
+        return value_and_grad(self.objective_value, self.objective.forward_mode())(x)
+
+    def with_objective(self, objective: AbstractObjective) -> AbstractProblem:
+        """The same problem measured by another objective."""
+        return dataclasses.replace(self, objective=objective)
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterProblem(AbstractProblem):
+    """Mechanism parameters as the variables (any name
+    :func:`jaxcrank.physics.params.set_parameter` accepts), Eq. 19 as the value, and
+    optionally the mean over manufactured parts (robust design).
+
+    Attributes (besides :class:`AbstractProblem`'s):
         scatter: manufacturing scatter for the robust objective, one
             ``(name, tolerance, distribution)`` per parameter: the part's value is the
             design's (or the base's) value plus a deviation within ``+-tolerance`` (SI),
@@ -53,44 +222,14 @@ class Problem:
         seed: seed of those draws.
     """
 
-    base: Mechanism
-    names: tuple[str, ...]
-    lower: tuple[float, ...]
-    upper: tuple[float, ...]
-    A: tuple[tuple[float, ...], ...] = ()
-    b: tuple[float, ...] = ()
-    start: tuple[float, ...] | None = None
-    objective: Objective = Objective()
-    cost_weight: float = 0.0
-    cost_reference: float = 5e-4
-    title: str = ""
     scatter: tuple[tuple[str, float, str], ...] = ()
     samples: int = 0
     seed: int = 0
 
-    def __post_init__(self):
-        n = len(self.names)
-        if n == 0:
-            raise ParameterError("a design problem needs at least one variable")
-        if len(self.lower) != n or len(self.upper) != n:
-            raise ParameterError(f"lower and upper need {n} values (one per variable {list(self.names)})")
-        for name, lo, hi in zip(self.names, self.lower, self.upper):
-            if not lo < hi:
-                raise ParameterError(f"bounds of {name!r}: lower = {lo:g} must be below upper = {hi:g}")
-            get_parameter(self.base, name)  # raises on unknown names
-        if len(self.A) != len(self.b) or any(len(row) != n for row in self.A):
-            raise ParameterError(
-                f"constraints: A must be (m, {n}) and b (m,), got {len(self.A)} rows, {len(self.b)} bounds"
-            )
-        if self.cost_weight < 0:
-            raise ParameterError(f"cost_weight = {self.cost_weight:g} must be >= 0")
-        if self.cost_weight > 0 and not any(nm.startswith("clearance_") for nm in self.names):
-            raise ParameterError("cost_weight > 0 needs clearance_B or clearance_C among the variables")
-        if self.start is not None and len(self.start) != n:
-            raise ParameterError(f"start needs {n} values")
-        self._check_scatter()
+    def check_variable(self, name: str) -> None:
+        get_parameter(self.base, name)  # raises on unknown names
 
-    def _check_scatter(self):
+    def check(self) -> None:
         if self.samples < 0:
             raise ParameterError(f"samples = {self.samples} must be >= 0 (0: no manufacturing scatter)")
         if self.samples and not self.scatter:
@@ -129,60 +268,15 @@ class Problem:
         when the objective is a mean over them (``samples > 0``)."""
         return f"{self.title} (mean over {self.samples} manufactured parts)" if self.samples else self.title
 
-    # ------------------------------------------------------------------ scaling
-    @property
-    def n(self) -> int:
-        return len(self.names)
-
-    @property
-    def span(self) -> Float[Array, " n"]:
-        return jnp.asarray(self.upper) - jnp.asarray(self.lower)
-
-    def to_unit(self, x: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
-        return (jnp.asarray(x, dtype=float) - jnp.asarray(self.lower)) / self.span
-
-    def from_unit(self, u: Float[ArrayLike, " n"]) -> Float[Array, " n"]:
-        return jnp.asarray(self.lower) + jnp.asarray(u, dtype=float) * self.span
-
     def feasible(self, x: Float[ArrayLike, "*designs n"], tol=1e-12) -> Bool[ArrayLike, "*designs"]:
         """Whether the SI design ``x`` satisfies bounds and constraints (numpy bool, batched)."""
-        x = np.asarray(x, dtype=float)
-        ok = np.all((x >= np.asarray(self.lower) - tol) & (x <= np.asarray(self.upper) + tol), axis=-1)
-        for row, bound in zip(self.A, self.b):
-            ok &= x @ np.asarray(row) <= bound + tol
-        return ok
+        return self.box_feasible(x, tol)
 
-    def project(self, u: Float[ArrayLike, " n"], iterations: int = 100) -> Float[Array, " n"]:
-        """Euclidean projection of the scaled design ``u`` onto the scaled feasible set."""
-        u = jnp.asarray(u, dtype=float)
-        box = lambda v: optax.projections.projection_box(v, 0.0, 1.0)  # noqa: E731
-        if not self.A:
-            return box(u)
-        lo, span = jnp.asarray(self.lower), self.span
-        rows = [(jnp.asarray(r) * span, bnd - jnp.dot(jnp.asarray(r), lo)) for r, bnd in zip(self.A, self.b)]
-        sets = [box] + [lambda v, a=a, c=c: optax.projections.projection_halfspace(v, a, c) for a, c in rows]
-
-        def sweep(carry, _):  # Dykstra's alternating projections with corrections
-            v, corr = carry
-            new = []
-            for proj, p in zip(sets, corr):
-                w = proj(v + p)
-                new.append(v + p - w)
-                v = w
-            return (v, tuple(new)), None
-
-        (v, _), _ = jax.lax.scan(sweep, (u, tuple(jnp.zeros_like(u) for _ in sets)), None, length=iterations)
-        return v
-
-    def start_unit(self) -> Float[Array, " n"]:
-        """Scaled, projected start design."""
-        x0 = self.start if self.start is not None else [get_parameter(self.base, nm) for nm in self.names]
-        return self.project(self.to_unit(x0))
-
-    # ------------------------------------------------------------------ model
     def mechanism(self, x: Float[ArrayLike, " n"]) -> Mechanism:
-        """The mechanism at SI design ``x`` (traceable)."""
         return set_parameters(self.base, self.names, x)
+
+    def default_start(self) -> list[float]:
+        return [float(get_parameter(self.base, nm)) for nm in self.names]
 
     def draws(self) -> Float[np.ndarray, "samples scatter"]:
         """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI:
@@ -200,37 +294,24 @@ class Problem:
         names = [nm for nm, _, _ in self.scatter]
         return set_parameters(mech, names, [parameter_value(mech, nm) + deviation[j] for j, nm in enumerate(names)])
 
-    def cost(self, x: Float[ArrayLike, " n"]) -> Float[Array, ""]:
-        """Manufacturing cost term, degrees: ``cost_weight * sum_j cost_reference / c_j``
-        over the clearance variables (reciprocal cost-tolerance model: halving a
-        clearance doubles its machining cost)."""
-        terms = [self.cost_reference / x[i] for i, nm in enumerate(self.names) if nm.startswith("clearance_")]
-        return self.cost_weight * sum(terms) if terms else jnp.zeros(())
+    def loss(self, rms: dict) -> Float[Array, ""]:
+        return rms[EQ19]
 
-    def value_and_grad(self, x: Float[ArrayLike, " n"]) -> tuple[Float[Array, ""], Float[Array, " n"]]:
-        """The objective (degrees) at SI design ``x`` (n,) and its gradient (n,), degrees
-        per SI unit, by forward or reverse mode as the objective's settings say
-        (:func:`optim.objective.forward_mode`). Traceable; ``jax.jit`` it."""
-        return value_and_grad(self.objective_value, forward_mode(self.objective))(x)
-
-    def objective_value(self, x: Float[ArrayLike, " n"], method: str | None = None) -> Float[Array, ""]:
-        """Total objective at SI design ``x``: Eq. 19 (degrees) + cost. Differentiate it
-        with :meth:`value_and_grad` (the default ensemble windows are forward-mode)."""
-        obj = self.objective if method is None else dataclasses.replace(self.objective, method=method)
+    def objective_value(self, x: Float[ArrayLike, " n"]) -> Float[Array, ""]:
         if not self.samples:
-            return value(self.mechanism(x), obj) + self.cost(x)
-        parts = jax.vmap(lambda d: value(self.part(x, d), obj))(jnp.asarray(self.draws()))
+            return self.loss(self.objective.rms(self.mechanism(x))) + self.cost(x)
+        parts = jax.vmap(lambda d: self.loss(self.objective.rms(self.part(x, d))))(jnp.asarray(self.draws()))
         return jnp.mean(parts) + self.cost(x)
 
 
-def paper_problem(objective: Objective = Objective(), start: Sequence[float] | None = None) -> Problem:
+def paper_problem(objective: AbstractObjective = Ensemble(), start: Sequence[float] | None = None) -> ParameterProblem:
     """The paper's problem (Eq. 19): L1 in [110, 130] mm, L2 in [390, 410] mm,
     ``L2 >= L1 + e`` (written ``L1 - L2 <= -e``), offset e fixed at the preset's 50 mm.
     Start: the box centre (L1 = 120, L2 = 400 mm); the paper's own design (L1 = 150
     mm) lies outside its stated box."""
     base = paper()
     e = float(base.offset)
-    return Problem(
+    return ParameterProblem(
         base=base,
         names=("crank_length", "rod_length"),
         lower=(0.110, 0.390),
@@ -244,12 +325,12 @@ def paper_problem(objective: Objective = Objective(), start: Sequence[float] | N
 
 
 def tolerance_problem(
-    objective: Objective = Objective(), cost_weight: float = 0.005, start: Sequence[float] | None = None
-) -> Problem:
+    objective: AbstractObjective = Ensemble(), cost_weight: float = 0.005, start: Sequence[float] | None = None
+) -> ParameterProblem:
     """Tolerance allocation: radial clearances c_B, c_C in [0.1, 0.5] mm at the
     paper's geometry, minimising RMS transmission-angle error + manufacturing cost
-    (:meth:`Problem.cost`, reference clearance 0.5 mm). Start: 0.4 mm at both."""
-    return Problem(
+    (:meth:`AbstractProblem.cost`, reference clearance 0.5 mm). Start: 0.4 mm at both."""
+    return ParameterProblem(
         base=paper(),
         names=("clearance_B", "clearance_C"),
         lower=(1e-4, 1e-4),
@@ -273,8 +354,8 @@ ROBUST_SCATTER = (
 
 
 def robust_problem(
-    objective: Objective = Objective(), samples: int = 8, seed: int = 0, start: Sequence[float] | None = None
-) -> Problem:
+    objective: AbstractObjective = Ensemble(), samples: int = 8, seed: int = 0, start: Sequence[float] | None = None
+) -> ParameterProblem:
     """The paper's L1, L2 problem under manufacturing tolerances: minimise the
     expected RMS transmission-angle error over ``samples`` parts drawn from
     :data:`ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
@@ -282,12 +363,3 @@ def robust_problem(
     return dataclasses.replace(
         p, scatter=ROBUST_SCATTER, samples=samples, seed=seed, title="robust: expected RMS transmission-angle error"
     )
-
-
-def _design(**kwargs):
-    from .design import design_problem  # optim.design builds on this module
-
-    return design_problem(**kwargs)
-
-
-PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem, "robust": robust_problem, "design": _design}

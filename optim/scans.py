@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -31,8 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import search
-from .objective import Objective
-from .problem import PROBLEMS, Problem
+from .objective import AbstractObjective, Ensemble
+from .presets import PROBLEMS
+from .problem import AbstractProblem as Problem
 
 
 def least_squares_slope(x, y):
@@ -48,10 +48,9 @@ def line(x0, i, offsets):
     return xs
 
 
-def gradient(problem: Problem, x0, method: str):
-    """d objective / d x (deg per SI unit) at SI design x0 with ``method``."""
-    obj = dataclasses.replace(problem.objective, method=method)
-    prob = dataclasses.replace(problem, objective=obj)
+def gradient(problem: Problem, x0, objective: AbstractObjective | None = None):
+    """d objective / d x (deg per SI unit) at SI design x0 by ``objective`` (default the problem's)."""
+    prob = problem if objective is None else problem.with_objective(objective)
     return np.asarray(jax.jit(prob.value_and_grad)(jnp.asarray(x0, dtype=float))[1])
 
 
@@ -73,7 +72,7 @@ def run(
             "problem": problem.description,
             "start": x0.tolist(),
             "names": list(problem.names),
-            "objective": dataclasses.asdict(problem.objective),
+            "objective": problem.objective.describe(),
             "variables": {},
         },
     )
@@ -101,12 +100,12 @@ def run(
     report["scan_seconds"] = time.perf_counter() - tic
 
     tic = time.perf_counter()
-    g = gradient(problem, x0, "ensemble")
+    g = gradient(problem, x0)
     report["ensemble_gradient"] = g.tolist()
     report["ensemble_gradient_seconds"] = time.perf_counter() - tic
     if pathwise_gradient:
         tic = time.perf_counter()
-        report["pathwise_gradient"] = gradient(problem, x0, "pathwise").tolist()
+        report["pathwise_gradient"] = gradient(problem, x0, search.pathwise_of(problem.objective)).tolist()
         report["pathwise_gradient_seconds"] = time.perf_counter() - tic
     for i, name in enumerate(problem.names):
         e = report["variables"][name]
@@ -134,7 +133,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="window (0.1, 0.12] s and fewer points (smoke run)")
     ap.add_argument("--no-pathwise", action="store_true", help="skip the (expensive, exploding) pathwise gradient")
     args = ap.parse_args(argv)
-    obj = Objective(t_end=0.12) if args.quick else Objective()
+    obj = Ensemble(t_end=0.12) if args.quick else Ensemble()
     problem = PROBLEMS[args.problem](objective=obj)
     pts, fine = (7, 11) if args.quick else (args.points, args.fine_points)
     report = run(problem, args.out, pts, fine, args.half_width, pathwise_gradient=not args.no_pathwise)

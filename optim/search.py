@@ -2,8 +2,9 @@
 the ``vmap`` grid search (ground truth for the optimiser and its gradient-free
 baseline) and the batched evaluations the 1-D scans use.
 
-Each design is one forward solve from the pins-centred start (the ``pathwise``
-Eq. 19 value, which is the objective itself) plus the cost term; for a robust
+Each design is one forward solve from the pins-centred start (the
+:class:`~optim.objective.Pathwise` value over the objective's window, which is the
+windowed objectives' value) plus the cost term; for a robust
 problem (``Problem.samples > 0``) the mean over its manufactured parts. Designs are
 solved ``chunk`` at a time under ``vmap`` so memory stays bounded; a design whose
 solve fails is reported in ``status`` (never a silent NaN).
@@ -23,21 +24,42 @@ from tqdm.auto import tqdm
 
 from jaxcrank.physics.params import ParameterError
 
-from .objective import pathwise_errors
-from .problem import Problem
+from .objective import AbstractObjective, Ensemble, Pathwise
+from .problem import AbstractProblem as Problem
+
+
+def pathwise_of(objective: AbstractObjective) -> Pathwise:
+    """The :class:`~optim.objective.Pathwise` objective over the same window and
+    tolerances as ``objective`` (a windowed one: pathwise or ensemble), whose value is
+    the objective's value.
+
+    Raises:
+        ParameterError: ``objective`` has no evaluation window (the steady state: evaluate
+            its designs with :mod:`optim.steady`).
+    """
+    if isinstance(objective, Pathwise):
+        return objective
+    if isinstance(objective, Ensemble):
+        keep = ("t_start", "t_end", "samples_per_degree", "rtol", "atol", "max_steps")
+        return Pathwise(**{k: getattr(objective, k) for k in keep})
+    raise ParameterError(
+        f"the grid search evaluates windowed objectives (Pathwise, Ensemble), not {type(objective).__name__}"
+    )
 
 
 @functools.partial(jax.jit, static_argnums=0)
 def _batch(problem: Problem, xs):
-    def rms(mech):
-        sq, ok = pathwise_errors(mech, problem.objective)
-        return jnp.sqrt(jnp.mean(sq)), ok
+    objective = pathwise_of(problem.objective)
+
+    def value(mech):
+        rms, ok = objective.evaluate(mech)
+        return problem.loss(rms), ok
 
     def one(x):
-        if not problem.samples:
-            return rms(problem.mechanism(x))
+        if not getattr(problem, "samples", 0):
+            return value(problem.mechanism(x))
         # robust problem: the mean over the same manufactured parts as the objective
-        values, ok = jax.vmap(lambda d: rms(problem.part(x, d)))(jnp.asarray(problem.draws()))
+        values, ok = jax.vmap(lambda d: value(problem.part(x, d)))(jnp.asarray(problem.draws()))
         return jnp.mean(values), jnp.all(ok)
 
     return jax.vmap(one)(xs)
@@ -65,7 +87,8 @@ def _with_cost(problem: Problem, xs, errors, ok):
 def rms_errors(
     problem: Problem, xs: Float[ArrayLike, "designs n"], chunk: int = 16, progress: bool = True
 ) -> tuple[Float[np.ndarray, " designs"], Bool[np.ndarray, " designs"]]:
-    """Eq. 19 values (degrees, without the cost term) and status at SI designs ``xs``."""
+    """The problem's values without the cost term (degrees; Eq. 19 for a parameter problem)
+    and status at SI designs ``xs``."""
     xs = np.atleast_2d(np.asarray(xs, dtype=float))
     values, oks = [], []
     with tqdm(total=len(xs), desc="designs", unit="design", disable=not progress) as bar:

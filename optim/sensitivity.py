@@ -6,14 +6,14 @@
 elasticities ``(dm/dp) (p / m)`` (percent change of the metric per percent change
 of the parameter), which :func:`optim.plots.plot_tornado` draws as a tornado chart.
 
-The same care as the optimisation (:mod:`optim.objective`): over the paper's
+The same care as the optimisation (:class:`optim.objective.Ensemble`): over the paper's
 window the pathwise derivative of a chaotic trajectory is ~1e27 and meaningless;
 the gradient here is the ensemble-sensitivity estimate. One solve at the design
 gives the exact metric values and the pins' states in their bearings at the start
 of K short windows; each window is re-solved from that state (carried over to the
 perturbed design) with an implicit solver, the per-window sums of squares are
 differentiated (forward mode by default, one tangent per parameter;
-``Objective.window_gradient = "reverse"`` for reverse-mode Jacobians), and the
+``Ensemble(window_adjoint=diffrax.RecursiveCheckpointAdjoint())`` for reverse-mode Jacobians), and the
 ensemble mean is taken.
 
 Valid for: time averages of squares, i.e. the RMS metrics (transmission-angle
@@ -32,14 +32,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from jaxcrank import metrics, model
+from jaxcrank import metrics
 from jaxcrank.numerics.solve import Simulation
 from jaxcrank.physics.params import Mechanism, get_parameter, parameter_unit, set_parameters
 
-from .objective import Objective, forward_mode, solve_window, tracked_solve, window_starts
+from . import windows as W
+from .objective import Ensemble
 
 #: metrics whose gradient the ensemble estimate follows: the RMS metrics of
-#: :mod:`jaxcrank.analysis.metrics` (units in the suffix)
+#: :mod:`jaxcrank.analysis.metrics` (units in the suffix); the rows of the results below
 METRICS = metrics.RMS_METRICS
 
 #: default parameters: the physical design and operating parameters (not the smoothing widths)
@@ -59,39 +60,24 @@ PARAMETERS = (
 )
 
 
-def deviations(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, "n 6"]:
-    """Per-sample signals behind :data:`METRICS` (deviations from the ideal mechanism
-    and the contact forces), shape (n, 6), in that order and in their units
-    (deg, m, m, N m, N, N)."""
-    return jax.vmap(lambda t, y: metrics.rms_signals(model.evaluate(mech, t, y)))(ts, ys)
-
-
-def metric_values(sim: Simulation) -> Float[Array, " 6"]:
+def metric_values(sim: Simulation) -> Float[Array, " metrics"]:
     """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
-    :mod:`jaxcrank.numerics.tracking`), shape (6,), in their units."""
-    return metrics.stack(METRICS, sim.metrics)
+    :mod:`jaxcrank.numerics.tracking`), stacked in the order of :data:`METRICS`, in their units."""
+    return jnp.stack([sim.metrics[k] for k in METRICS])
 
 
 def window_sums(
-    base: Mechanism,
-    names,
-    x: Float[ArrayLike, " params"],
-    starts,
-    i: Int[ArrayLike, ""],
-    n_window: int,
-    dt: float,
-    obj: Objective,
+    base: Mechanism, names, x: Float[ArrayLike, " params"], starts: W.Starts, i: Int[ArrayLike, ""], obj: Ensemble
 ) -> tuple[Float[Array, " metrics"], Bool[Array, ""]]:
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
-    carried-over start state: the sums of squares of :func:`deviations` over its
-    samples, shape (6,), in the units of :data:`METRICS` squared, and whether it
-    finished."""
-    m = set_parameters(base, names, x)
-    ts, ys, ok = solve_window(m, starts, i, n_window, dt, obj)
-    return jnp.sum(deviations(m, ts, ys) ** 2, axis=0), ok
+    carried-over start state (:meth:`optim.objective.Ensemble.window_sums`): the sums of
+    squares of the metrics' signals over its samples, stacked in the order of
+    :data:`METRICS` (units squared), and whether it finished."""
+    sums, ok = obj.window_sums(set_parameters(base, names, x), starts, i, obj.grid(base))
+    return jnp.stack([sums[k] for k in METRICS]), ok
 
 
-def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objective = Objective()) -> dict:
+def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Ensemble = Ensemble()) -> dict:
     """Values, gradients and elasticities of :data:`METRICS` at ``mech`` over the
     objective's window (``obj``: window, ensemble windows, solver, tolerances).
 
@@ -103,20 +89,21 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     names = list(names)
     units = [parameter_unit(n) for n in names]
     grid = obj.grid(mech)  # concrete sample grid of the design (crank speed may be a variable below)
-    _, _, n_window, dt = grid
+    n_window, dt = grid.n_window, grid.dt
     # the metrics over the samples in (t_start, t_end] tracked during the solve, which
     # stores only the windows' starts
-    sim = tracked_solve(mech, obj, True, grid)
+    opts = dict(rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps)
+    sim = W.tracked_solve(mech, grid, obj.windows, opts, True)
     value = metric_values(sim)
-    starts = window_starts(sim)
+    starts = W.window_starts(sim)
     x0 = jnp.array([get_parameter(mech, n) for n in names])
 
     # forward mode: one tangent per parameter; reverse mode: one cotangent per metric
-    jacobian = jax.jacfwd if forward_mode(obj) else jax.jacrev
+    jacobian = jax.jacfwd if obj.forward_mode() else jax.jacrev
 
     def jac(i):
         def with_aux(x):
-            sums, ok = window_sums(mech, names, x, starts, i, n_window, dt, obj)
+            sums, ok = window_sums(mech, names, x, starts, i, obj)
             return sums, (sums, ok)
 
         rows, (sums, ok) = jacobian(with_aux, has_aux=True)(x0)
@@ -128,7 +115,7 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
     if n_ok < 0.5 * len(ok):
         raise RuntimeError(
             f"{len(ok) - n_ok} of {len(ok)} ensemble windows failed; raise "
-            "Objective.window_max_steps, loosen rtol/atol or shorten Objective.window"
+            "Ensemble.window_max_steps, loosen rtol/atol or shorten Ensemble.window"
         )
     w = ok.astype(float)
     estimate = np.sqrt(np.einsum("k,kc->c", w, sums) / (n_window * n_ok))
@@ -155,3 +142,31 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Objec
         "starts": starts,
         "grid": grid,
     }
+
+
+def window_gradients(mech: Mechanism, starts: W.Starts, obj: Ensemble = Ensemble()):
+    """Each ensemble window's sum of squared transmission-angle errors (deg^2), shape
+    (K,), whether its solve succeeded (K,), and its gradient with respect to every
+    floating-point parameter of ``mech`` (a Mechanism of (K,) arrays), each window
+    re-solved from the carried-over start state, one after another, each with its
+    reverse-mode gradient whatever ``obj.window_adjoint`` (``bench/window_gradients.py``
+    looks at their distribution)."""
+    import dataclasses
+
+    import diffrax
+    import equinox as eqx
+
+    obj = dataclasses.replace(obj, window_adjoint=diffrax.RecursiveCheckpointAdjoint())
+
+    def is_float(x):
+        return isinstance(x, float) or (isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.inexact))
+
+    params, static = eqx.partition(mech, is_float)
+    params = jax.tree.map(lambda x: jax.lax.stop_gradient(jnp.asarray(x)), params)
+
+    def one(p, i):
+        sums, ok = obj.window_sums(eqx.combine(p, static), starts, i)
+        return sums["rms_transmission_angle_error_deg"], ok
+
+    (sq, ok), grads = W.over_windows(lambda i: jax.value_and_grad(one, has_aux=True)(params, i), starts)
+    return sq, ok, grads

@@ -28,16 +28,16 @@ events = []
 jax.monitoring.register_event_listener(lambda name, **kw: events.append(name))
 import numpy as np
 import pytest
-from optim.objective import Objective
+from optim.objective import Ensemble
 from optim.optimize import programs
-from optim.problem import Problem, paper_problem
+from optim.problem import ParameterProblem, paper_problem
 traced = []
-original = Problem.objective_value
+original = ParameterProblem.objective_value
 def counting(self, *a, **k):
     traced.append(1)
     return original(self, *a, **k)
-Problem.objective_value = counting
-prob = paper_problem(Objective(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_solver="tsit5"), start=None)
+ParameterProblem.objective_value = counting
+prob = paper_problem(Ensemble(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_solver="tsit5"), start=None)
 vg, _ = programs(prob)
 value, grad = vg(np.asarray(prob.start_unit()), 1.0)
 print(json.dumps({"traced": len(traced), "value": float(value), "grad": np.asarray(grad).tolist(),

@@ -42,12 +42,12 @@ sweep.run(jc.paper(), names, designs, settings, out=out, resume=(out / "table.cs
 _OPTIMIZE = """
 import sys
 from pathlib import Path
-from optim import objective as O
+from optim.objective import Pathwise
 from optim.optimize import Settings, optimize
 from optim.problem import paper_problem
 out = Path(sys.argv[1])
-prob = paper_problem(O.Objective(t_start=0.0, t_end=2e-3, method="pathwise"))
-optimize(prob, Settings(method="adam", max_iterations=6, gtol=0.0, xtol=0.0), out=out,
+prob = paper_problem(Pathwise(t_start=0.0, t_end=2e-3))
+optimize(prob, Settings(max_iterations=6, gtol=0.0, xtol=0.0), out=out,
          resume=(out / "checkpoint.npz").exists(), progress=False)
 """
 
@@ -207,8 +207,9 @@ def test_cli_resume_of_a_truncated_table_is_one_line(table_dir, tmp_path, capsys
 
 def _checkpoint(out):
     """A real checkpoint of the paper problem after one (made-up) iteration."""
-    from optim.optimize import Settings, history_columns
-    from optim.optimize import _checkpoint as write
+    from optim.checkpoint import history_columns
+    from optim.checkpoint import save as write
+    from optim.optimize import Settings
     from optim.problem import paper_problem
 
     prob = paper_problem()
@@ -227,7 +228,8 @@ def _checkpoint(out):
     ],
 )
 def test_damaged_checkpoint_is_refused_by_name(tmp_path, damage, match):
-    from optim.optimize import Settings, load_checkpoint, optimize
+    from optim.checkpoint import load as load_checkpoint
+    from optim.optimize import Settings, optimize
 
     prob, path = _checkpoint(tmp_path)
     load_checkpoint(tmp_path)  # intact: reads
@@ -238,7 +240,7 @@ def test_damaged_checkpoint_is_refused_by_name(tmp_path, damage, match):
 
 
 def test_checkpoint_without_its_metadata_is_refused(tmp_path):
-    from optim.optimize import load_checkpoint
+    from optim.checkpoint import load as load_checkpoint
 
     _, path = _checkpoint(tmp_path)
     with np.load(path) as arrays:

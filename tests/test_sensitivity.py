@@ -10,10 +10,10 @@ import pytest
 
 import jaxcrank as jc
 from optim import plots, sensitivity
-from optim.objective import Objective
+from optim.objective import Ensemble
 
 NAMES = ("rod_length", "clearance_C")
-OBJ = Objective(
+OBJ = Ensemble(
     t_start=0.002,
     t_end=0.004,
     window=1e-3,
@@ -51,11 +51,9 @@ def windowed(result):
     """(Jacobian (6, 2) in forward mode, the windows' default, central difference at
     (column j, step h)) of the windows' summed squares at the paper design, solves at
     rtol 1e-9."""
-    mech, starts, (_, _, n_window, dt) = jc.paper(), result["starts"], result["grid"]
+    mech, starts = jc.paper(), result["starts"]
     x0 = jnp.asarray(result["x"])
-    total = jax.jit(
-        lambda x: sum(sensitivity.window_sums(mech, NAMES, x, starts, i, n_window, dt, OBJ)[0] for i in range(2))
-    )
+    total = jax.jit(lambda x: sum(sensitivity.window_sums(mech, NAMES, x, starts, i, OBJ)[0] for i in range(2)))
     jac = np.asarray(jax.jacfwd(total)(x0))
 
     def central(j, h):

@@ -78,7 +78,7 @@ def test_periodic_orbit_against_finite_differences_and_long_run(periodic):
     # the orbit's start state against a long plain simulation from rest (30 revolutions;
     # the leading multiplier is below 1e-2, so its section settled to rounding long before)
     T = float(mech.period)
-    long = jc.simulate(mech, ts=jnp.arange(31) * T, rtol=1e-10, atol=1e-10, max_steps=5_000_000)
+    long = jc.simulate(mech, ts=jnp.arange(31.0) * T, rtol=1e-10, atol=1e-10, max_steps=5_000_000)
     assert np.max(np.abs(np.asarray(long.ys[-1, :n]) - np.asarray(y[:n]))) <= 1e-6
     # the fixed point: one more revolution returns to it
     assert np.max(np.abs(np.asarray(_plain_map(mech, y))[:n] - np.asarray(y[:n]))) <= 1e-7

@@ -73,12 +73,15 @@ def test_chunk_that_fits_and_the_error_for_one_that_does_not():
 
 
 def _reference_program_bytes(samples_per_degree):
-    from optim import objective as O
+    from optim import windows as W
+    from optim.objective import Ensemble
 
-    obj = O.Objective(t_start=0.002, t_end=0.004, window=5e-4, windows=4, samples_per_degree=samples_per_degree)
+    obj = Ensemble(t_start=0.002, t_end=0.004, window=5e-4, windows=4, samples_per_degree=samples_per_degree)
     grid = obj.grid(jc.paper())
     base = jc.paper()
-    program = jax.jit(lambda length: O.tracked_solve(set_parameters(base, ["rod_length"], length), obj, False, grid))
+    program = jax.jit(
+        lambda length: W.tracked_solve(set_parameters(base, ["rod_length"], length), grid, obj.windows, {}, False)
+    )
     memory = program.lower(jnp.array([0.403])).compile().memory_analysis()
     return memory.temp_size_in_bytes + memory.output_size_in_bytes
 
@@ -88,17 +91,18 @@ def test_objective_solve_stores_only_the_window_starts():
     Eq. 19 value, sensitivities and design terms) tracks its metrics and stores the
     K window starts only: the same bytes at 1 and 100 samples per degree, and the
     same value and start states as a solve that stores every sample (to rounding)."""
-    from optim import objective as O
+    from optim import windows as W
+    from optim.objective import Ensemble
 
     assert _reference_program_bytes(1) == _reference_program_bytes(100)
-    obj = O.Objective(t_start=0.002, t_end=0.004, window=5e-4, windows=4)
+    obj = Ensemble(t_start=0.002, t_end=0.004, window=5e-4, windows=4)
     mech = jc.paper()
     grid = obj.grid(mech)
     n_start, n_eval, _, dt = grid
-    sim = O.tracked_solve(mech, obj, True, grid)
+    sim = W.tracked_solve(mech, grid, obj.windows, {}, True)
     assert sim.ys.shape[0] == 4
     stored = jc.simulate(mech, ts=dt * np.arange(n_start + n_eval + 1))
-    idx = O.window_start_indices(grid, obj)
+    idx = W.window_start_indices(grid, obj.windows)
     np.testing.assert_allclose(np.asarray(sim.ys), np.asarray(stored.ys)[idx], rtol=1e-12, atol=1e-12)
     err = outputs.transmission_angle_error(mech, stored.ts[n_start + 1 :], stored.ys[n_start + 1 :])
     rms = float(jnp.sqrt(jnp.mean(err**2)))

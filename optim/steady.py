@@ -1,0 +1,311 @@
+"""The steady-state objective: the metrics over one period of the mechanism's periodic
+orbit, with their exact gradient; the regime guard and the regime-classified starts of
+the optimiser.
+
+A machine runs for hours: its designer cares about the motion it settles into, not the
+start-up from rest. :class:`Steady` measures a design there
+(:func:`jaxcrank.steady_state`):
+
+- **periodic regime** (an attracting periodic orbit of period k revolutions): the RMS
+  metrics over one period of the orbit, Eq. 19 and the design terms among them, and
+  their exact gradient by the implicit function theorem at the orbit,
+  ``dy*/dp = (I - M)^-1 dPhi^k/dp`` on the dynamic subspace
+  (:func:`jaxcrank.numerics.steady.orbit_start`), then forward mode through one
+  period from y*. Each evaluation is warm-started from the previous design's orbit, so
+  an optimiser's step costs a few one-revolution solves.
+- **not periodic** (chaotic impacts): the long-run statistical value of the metrics
+  (batch means over revolutions, with a 95 % confidence interval), reported as such;
+  its gradient is the ensemble estimate of the objective's ``trend`` (an
+  :class:`~optim.objective.Ensemble`), flagged as a trend estimate, or zero without one.
+
+The steady state is found on the host (settle, period detection, Newton shooting), so
+this objective is evaluated at concrete designs, outside ``jax.jit``: use
+:class:`SteadyEvaluator` (what :func:`optim.optimize.optimize` does) or
+:meth:`Steady.rms` with a concrete mechanism.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from jaxcrank.analysis.metrics import RMS_METRICS
+from jaxcrank.numerics import steady as S
+from jaxcrank.numerics.shooting import STEADY_DEFAULTS, period_solve
+from jaxcrank.numerics.solve import SolveOptions
+from jaxcrank.physics.params import Mechanism, ParameterError
+
+from .objective import AbstractObjective, Ensemble, value_and_grad
+
+#: the two regimes, as :func:`jaxcrank.steady_state` names them
+PERIODIC, NOT_PERIODIC = "periodic", "not periodic"
+
+
+class Steady(AbstractObjective):
+    """The RMS metrics over one period of the steady periodic orbit (module docstring).
+
+    Attributes:
+        settle_revolutions: revolutions settled from rest before shooting (a cold start), >= 1.
+        max_period: the longest period looked for, revolutions, >= 1.
+        newton_tol: Newton shooting tolerance, scaled units (clearances).
+        max_newton: Newton iterations at most.
+        samples_per_revolution: samples per revolution of the orbit's RMS metrics (equal
+            crank-angle steps), >= 2.
+        statistics_revolutions, batch_revolutions: not periodic: revolutions of the
+            long-run statistics and per batch of their batch means.
+        rtol, atol: solver tolerances on the scaled state, > 0 (shooting needs tight ones).
+        max_steps: step budget of each solve of the steady-state search (a design that
+            needs more is a failed evaluation: NaN, or raises with ``throw``).
+        trend: not periodic: the objective whose gradient serves as a trend estimate
+            (an :class:`~optim.objective.Ensemble`; None: zero gradient there).
+        throw: a failed steady-state solve raises (True) or gives NaN values (False).
+
+    Raises:
+        ParameterError: for a setting outside its range.
+    """
+
+    settle_revolutions: int = eqx.field(static=True, default=20)
+    max_period: int = eqx.field(static=True, default=2)
+    newton_tol: float = eqx.field(static=True, default=1e-7)
+    max_newton: int = eqx.field(static=True, default=8)
+    samples_per_revolution: int = eqx.field(static=True, default=720)
+    statistics_revolutions: int = eqx.field(static=True, default=10)
+    batch_revolutions: int = eqx.field(static=True, default=2)
+    rtol: float = eqx.field(static=True, default=STEADY_DEFAULTS.rtol)
+    atol: float = eqx.field(static=True, default=STEADY_DEFAULTS.atol)
+    max_steps: int = eqx.field(static=True, default=STEADY_DEFAULTS.max_steps)
+    trend: Ensemble | None = eqx.field(static=True, default=None)
+    throw: bool = eqx.field(static=True, default=True)
+
+    def __check_init__(self):
+        for name in ("settle_revolutions", "max_period", "batch_revolutions"):
+            if getattr(self, name) < 1:
+                raise ParameterError(f"Steady.{name} = {getattr(self, name)!r} must be >= 1")
+        if self.samples_per_revolution < 2:
+            raise ParameterError(f"Steady.samples_per_revolution = {self.samples_per_revolution!r} must be >= 2")
+        if self.trend is not None and not isinstance(self.trend, Ensemble):
+            raise ParameterError(f"Steady.trend = {self.trend!r} must be an Ensemble objective or None")
+
+    def options(self) -> SolveOptions:
+        """The solve settings of the shooting and of the orbit."""
+        return STEADY_DEFAULTS.replace(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
+
+    def solve(self, mech: Mechanism, warm_start=None) -> S.SteadyState:
+        """The steady state of the concrete ``mech`` (:func:`jaxcrank.steady_state`), warm
+        started from a previous :class:`jaxcrank.SteadyState` when given.
+
+        Raises:
+            jaxcrank.SteadyStateError: the solve failed and ``throw`` is True."""
+        return S.steady_state(
+            mech,
+            settle_revolutions=self.settle_revolutions,
+            max_period=self.max_period,
+            newton_tol=self.newton_tol,
+            max_newton=self.max_newton,
+            warm_start=warm_start,
+            statistics_revolutions=self.statistics_revolutions,
+            batch_revolutions=self.batch_revolutions,
+            samples_per_revolution=self.samples_per_revolution,
+            options=self.options(),
+            throw=self.throw,
+        )
+
+    def rms_at(self, mech: Mechanism, steady: S.SteadyState) -> dict[str, Float[Array, ""]]:
+        """The RMS metrics of ``mech`` (traceable; e.g. built from traced design
+        variables) given ``steady``, the steady state of its concrete value: periodic, the
+        metrics over one period from :func:`jaxcrank.numerics.steady.orbit_start` (exact
+        forward-mode gradient); not periodic, the long-run statistics' values with the
+        ``trend`` objective's gradient (or none); NaN when the solve failed."""
+        if not steady.ok:
+            return {k: jnp.asarray(jnp.nan) for k in RMS_METRICS}
+        if steady.periodic:
+            orbit = _light(steady)
+            sim = period_solve(
+                mech,
+                S.orbit_start(mech, orbit),
+                orbit.period_revolutions,
+                options=orbit.options,
+                samples_per_revolution=self.samples_per_revolution,
+            )
+            return {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in RMS_METRICS}
+        values = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in RMS_METRICS}
+        if self.trend is None:
+            return values
+        sg = jax.lax.stop_gradient
+        _, starts = self.trend.reference(sg(mech))
+        surrogate = self.trend.pooled(mech, starts)
+        return {k: values[k] + (surrogate[k] - sg(surrogate[k])) for k in RMS_METRICS}
+
+    def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
+        """The RMS metrics of a concrete ``mech`` (:meth:`solve` then :meth:`rms_at`)."""
+        return self.rms_at(mech, self.solve(mech))
+
+    def forward_mode(self) -> bool:
+        return True
+
+    def describe(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["trend"] = None if self.trend is None else self.trend.describe()
+        return {"kind": "steady_state", **d}
+
+
+def _light(steady: S.SteadyState) -> S.SteadyState:
+    """``steady`` without what :func:`jaxcrank.numerics.steady.orbit_start` does not need
+    (the orbit, metrics, statistics and the settle's points), hashable for ``jit``."""
+    return dataclasses.replace(
+        steady,
+        mechanism=None,
+        orbit=None,
+        metrics={},
+        statistics=None,
+        section_points=steady.section_points[-1:],
+        revolutions=(),
+        newton_iterations=0,
+    )
+
+
+def report(steady: S.SteadyState) -> dict:
+    """The regime of a steady state as plain values: ``regime``, ``period_revolutions``,
+    ``leading_multiplier`` (the largest |Floquet multiplier|, per period),
+    ``lyapunov_exponent_per_s``, ``ok`` and, not periodic, ``statistics`` (metric ->
+    value and 95 % confidence interval, units in the names) and
+    ``gradient = "trend estimate"``."""
+    moduli = steady.multiplier_moduli
+    out = {
+        "ok": steady.ok,
+        "regime": steady.regime,
+        "period_revolutions": int(steady.period_revolutions),
+        "leading_multiplier": float(moduli[0]) if moduli.size else math.nan,
+        "lyapunov_exponent_per_s": float(steady.lyapunov_exponent_per_s),
+        "revolutions": dict(steady.revolutions),
+    }
+    if steady.statistics is not None:
+        out["statistics"] = {k: {q: float(v) for q, v in s.items()} for k, s in steady.statistics.items()}
+        out["gradient"] = "trend estimate"
+    return out
+
+
+#: compiled value-and-gradient programs: (problem without its start, period, dynamic subspace) -> program
+_PROGRAMS: dict = {}
+
+
+class SteadyEvaluator:
+    """Value and exact gradient of a problem measured by a :class:`Steady` objective, at
+    concrete designs, each steady state warm-started from the last periodic one.
+
+    Args:
+        problem: a problem (:class:`~optim.problem.AbstractProblem`) whose objective is
+            a :class:`Steady`; a parameter problem without manufacturing scatter.
+
+    Raises:
+        ParameterError: for another objective, or a problem with manufacturing scatter.
+    """
+
+    def __init__(self, problem):
+        if not isinstance(problem.objective, Steady):
+            raise ParameterError(f"SteadyEvaluator needs a Steady objective, not {type(problem.objective).__name__}")
+        if getattr(problem, "samples", 0):
+            raise ParameterError("the steady-state objective does not average over manufactured parts (samples = 0)")
+        self.problem = problem
+        self.objective = problem.objective
+        self.last = None  # the last periodic steady state: the next warm start
+        self._steady = {}
+        self._trend = None
+        self.last_report = {}  # report() of the last evaluated design
+
+    def steady_at(self, x) -> S.SteadyState:
+        """The steady state at SI design ``x`` (cached for the last few designs)."""
+        key = tuple(float(v) for v in np.asarray(x, dtype=float))
+        if key not in self._steady:
+            mech = self.problem.mechanism(jnp.asarray(key))
+            warm = self.last if self.last is not None else None
+            steady = self.objective.solve(mech, warm_start=warm)
+            if steady.periodic:
+                self.last = steady
+            if len(self._steady) >= 4:
+                self._steady.pop(next(iter(self._steady)))
+            self._steady[key] = steady
+        return self._steady[key]
+
+    def value(self, x) -> tuple[float, dict]:
+        """``(value, regime)`` at SI design ``x`` without a gradient: the objective in
+        degrees over the orbit the steady-state solve computed (periodic), or the long-run
+        statistics' value (not periodic; NaN when the solve failed), and :func:`report`."""
+        steady = self.steady_at(x)
+        info = self.last_report = report(steady)
+        if not steady.ok:
+            return math.nan, info
+        if steady.periodic:
+            rms = {k: steady.metrics[k] for k in RMS_METRICS}
+        else:
+            rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in RMS_METRICS}
+        return float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x))), info
+
+    def regime_at(self, x) -> str:
+        """``"periodic"`` or ``"not periodic"`` at SI design ``x`` (``"failed"`` when the solve failed)."""
+        steady = self.steady_at(x)
+        return steady.regime if steady.ok else "failed"
+
+    def _program(self, steady: S.SteadyState):
+        """The compiled value and gradient for the orbits of ``steady``'s period and
+        dynamic subspace, taking the design and the orbit's section state and monodromy:
+        one program serves every design of a regime, and every evaluator of the same
+        problem (its start aside: multistart runs share it)."""
+        key = (dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
+        if key not in _PROGRAMS:
+            problem, objective, template = key[0], self.objective, _light(steady)
+
+            def f(x, section_state, monodromy):
+                light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
+                rms = objective.rms_at(problem.mechanism(x), light)
+                return problem.loss(rms) + problem.cost(x)
+
+            if len(_PROGRAMS) >= 8:
+                _PROGRAMS.pop(next(iter(_PROGRAMS)))
+            _PROGRAMS[key] = jax.jit(value_and_grad(f, True))
+        return _PROGRAMS[key]
+
+    def value_and_grad(self, x) -> tuple[float, np.ndarray, dict]:
+        """``(value, gradient, regime)`` at SI design ``x``: the objective in degrees, its
+        gradient in degrees per SI unit of each variable, and :func:`report` of the
+        steady state. Not periodic: the long-run value and the trend estimate (or zero)."""
+        x = np.asarray(x, dtype=float)
+        steady = self.steady_at(x)
+        info = self.last_report = report(steady)
+        if not steady.ok:
+            return math.nan, np.full(x.shape, np.nan), info
+        if steady.periodic:
+            value, grad = self._program(steady)(jnp.asarray(x), steady.section_state, steady.monodromy)
+            return float(value), np.asarray(grad), info
+        rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in RMS_METRICS}
+        value = float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x)))
+        if self.objective.trend is None:
+            return value, np.zeros(x.shape), info
+        if self._trend is None:
+            trend = self.problem.with_objective(self.objective.trend)
+            self._trend = jax.jit(trend.value_and_grad)
+        return value, np.asarray(self._trend(jnp.asarray(x))[1]), info
+
+
+@dataclasses.dataclass(frozen=True)
+class RegimeGuard:
+    """The optimiser's regime guard (``optim.optimize.Settings.guard``): a step to a design
+    that is not in the periodic regime is halved, at most ``max_halvings`` times, then
+    the iterate is held.
+
+    Attributes:
+        max_halvings: halvings of a refused step before the iterate is held, >= 0.
+    """
+
+    max_halvings: int = 3
+
+    def accept(self, evaluator: SteadyEvaluator, x) -> bool:
+        """Whether SI design ``x`` is in the periodic regime (its steady state is cached
+        for the evaluation that follows)."""
+        return evaluator.regime_at(x) == PERIODIC
