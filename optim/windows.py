@@ -92,7 +92,7 @@ def stored_solve(mech: Mechanism, grid: Grid, options: dict, throw: bool) -> tup
     """One solve from the pins-centred start that stores every sample of ``grid``: the
     simulation and the sample index of t_start (the samples in (t_start, t_end] follow
     it). Differentiable in reverse mode. ``options``: ``rtol``, ``atol``, ``max_steps``."""
-    ts = grid.dt * jnp.arange(grid.n_start + grid.n_eval + 1)
+    ts = grid.dt * jnp.arange(grid.n_start + grid.n_eval + 1, dtype=float)
     return simulate(mech, ts=ts, throw=throw, **options), grid.n_start
 
 
@@ -204,7 +204,7 @@ WINDOWS_FAILED = (
 def windows_ok(ok: Bool[Array, " windows"], throw: bool) -> Float[Array, ""]:
     """The number of finished windows (a scalar); fewer than half of ``ok`` raises
     (``throw``) or makes it NaN."""
-    n_ok = jnp.sum(ok)
+    n_ok = jnp.sum(ok, dtype=float)
     enough = n_ok >= 0.5 * ok.shape[0]
     if throw:
         return eqx.error_if(n_ok, ~enough, WINDOWS_FAILED)

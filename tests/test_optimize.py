@@ -171,7 +171,7 @@ def test_optimize_cli_with_several_starts_writes_each_start_and_the_best(tmp_pat
     out = tmp_path / "run"
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--grid", "0", "--quiet"]) == 0
     result = json.loads((out / "result.json").read_text())
-    finals = [r["final_objective"] for r in result["starts"]]
+    finals = [r["final_objective"] for r in result["start_runs"]]
     assert len(finals) == 3 and result["final_objective_deg"] == min(finals) == finals[result["best_start"]]
     for k in range(3):
         assert (out / f"start_{k:03d}" / "checkpoint.npz").exists()

@@ -257,7 +257,7 @@ def test_period_three_orbit_against_a_long_run():
     steady = steady_state(mech)
     assert steady.periodic and steady.period_revolutions == 3 and steady.multiplier_moduli[0] < 1.0
     n = 2 * model.n_dof(mech)
-    long = jc.simulate(mech, ts=jnp.arange(81) * float(mech.period), rtol=1e-10, atol=1e-10, max_steps=10_000_000)
+    long = jc.simulate(mech, ts=jnp.arange(81.0) * float(mech.period), rtol=1e-10, atol=1e-10, max_steps=10_000_000)
     ys = np.asarray(long.ys)[:, :n]
     assert np.max(np.abs(ys[-1] - ys[-4])) <= 1e-6 < 1e-2 < np.max(np.abs(ys[-1] - ys[-2]))
     y = np.asarray(steady.section_state)[:n]
