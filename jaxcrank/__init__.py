@@ -11,7 +11,7 @@ read the metric definitions of ``analysis.metrics``, which need the physics alon
 - ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
 
 Importing jaxcrank turns on float64 and adds two XLA CPU options to ``XLA_FLAGS``
-(:mod:`jaxcrank.numerics.runtime`): a documented, process-wide decision; what it changes
+([`jaxcrank.numerics.runtime`][]): a documented, process-wide decision; what it changes
 for other JAX code in the process is measured in the docs ("XLA runtime options").
 
 Each module is also reachable by its short name (``jaxcrank.outputs``,

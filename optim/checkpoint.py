@@ -1,7 +1,7 @@
 """The optimiser's checkpoint: ``checkpoint.npz`` (iterate, optimiser state, history)
 and ``history.csv``, replaced atomically (temporary file and rename) after every
 iteration. A truncated or corrupted checkpoint raises
-:class:`jaxcrank.CorruptFileError` naming the file; it is never silently replaced by a
+[`jaxcrank.CorruptFileError`][jaxcrank.errors.CorruptFileError] naming the file; it is never silently replaced by a
 fresh start."""
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ def flatten(state):
 
 
 def unflatten(template, arrays):
-    """The optimiser state shaped like ``template`` from :func:`flatten`'s arrays."""
+    """The optimiser state shaped like ``template`` from [`flatten`][optim.checkpoint.flatten]'s arrays."""
     leaves, treedef = jax.tree.flatten(template)
     return jax.tree.unflatten(
         treedef, [jnp.asarray(arrays[f"leaf{i}"], dtype=np.asarray(x).dtype) for i, x in enumerate(leaves)]

@@ -8,7 +8,7 @@ also get ``grid.csv`` and ``landscape.png``: the objective on an N x N vmap grid
 the box with the optimiser's path; it costs N^2 solves (docs/optimisation.md times
 it). With ``--starts N`` (N > 1) each start runs in ``start_NNN/`` (its own checkpoint
 and history) and ``multistart.json`` lists the starts; the top-level files describe
-the best run (:func:`optim.optimize.multistart`).
+the best run ([`optim.optimize.multistart`][]).
 
 ``result.json`` holds: the problem and method; ``converged`` (true when a stopping
 test was met) and ``stop_reason`` (the test, or the iteration limit); ``iterations``;
@@ -21,7 +21,7 @@ DIR/result.json``); ``starts`` (how many starts ran) and, for ``--starts N > 1``
 ``start_runs`` (each start's result) and ``best_start`` (the index of the best);
 ``grid`` (with ``--grid N``) and ``paper`` (the paper's numbers).
 
-The optimiser's compiled programs are kept in a cache folder (:mod:`jaxcrank.runs.cache`;
+The optimiser's compiled programs are kept in a cache folder ([`jaxcrank.runs.cache`][];
 ``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
 loads them instead of tracing and compiling again.
 
@@ -231,7 +231,8 @@ def objective_from_config(section: dict) -> AbstractObjective:
 
 
 def objective_config(objective: AbstractObjective) -> dict:
-    """The ``[objective]`` table of ``objective`` (:func:`objective_from_config` reads it back)."""
+    """The ``[objective]`` table of ``objective`` ([`objective_from_config`][optim.cli.objective_from_config] reads it
+    back)."""
     d = objective.describe()
     out = {"method": d.pop("kind")}
     if "window_adjoint" in d:
@@ -243,8 +244,8 @@ def objective_config(objective: AbstractObjective) -> dict:
 
 
 def settings_from_config(section: dict) -> Settings:
-    """:class:`optim.optimize.Settings` of an ``[optimizer]`` table: ``method`` (a name of
-    :data:`optim.optimizers.OPTIMIZERS`, default "adam") with its settings, then the
+    """[`optim.optimize.Settings`][] of an ``[optimizer]`` table: ``method`` (a name of
+    `optim.optimizers.OPTIMIZERS`, default "adam") with its settings, then the
     Settings fields."""
     values = dict(section)
     method = values.pop("method", "adam")
@@ -261,7 +262,8 @@ def settings_from_config(section: dict) -> Settings:
 
 
 def settings_config(settings: Settings) -> dict:
-    """The ``[optimizer]`` table of ``settings`` (:func:`settings_from_config` reads it back)."""
+    """The ``[optimizer]`` table of ``settings`` ([`settings_from_config`][optim.cli.settings_from_config] reads it
+    back)."""
     plain = {f.name: getattr(settings, f.name) for f in dataclasses.fields(settings)}
     plain.pop("optimizer"), plain.pop("guard")
     plain = {k: v for k, v in plain.items() if v is not None}
@@ -289,7 +291,7 @@ def resolved(problem: Problem, settings: Settings, name: str) -> dict:
 
 
 def _subclass_fields(problem: Problem) -> dict:
-    """The fields a problem class adds to :class:`~optim.problem.AbstractProblem`."""
+    """The fields a problem class adds to [`AbstractProblem`][optim.problem.AbstractProblem]."""
     extra = [f.name for f in dataclasses.fields(problem) if f.name not in {g.name for g in dataclasses.fields(Problem)}]
     return {
         k: ([list(e) for e in getattr(problem, k)] if k in ("weights", "scatter") else getattr(problem, k))
@@ -298,7 +300,7 @@ def _subclass_fields(problem: Problem) -> dict:
 
 
 def _regime(problem: Problem, x) -> dict:
-    """The steady-state regime of SI design ``x`` (:func:`optim.steady.report`)."""
+    """The steady-state regime of SI design ``x`` ([`optim.steady.report`][])."""
     from .steady import Steady, report
 
     objective = problem.objective if isinstance(problem.objective, Steady) else Steady(throw=False)

@@ -1,6 +1,7 @@
 """Many-variable design problems with nonlinear constraints held at every iterate.
 
-A :class:`DesignProblem` is a problem (:class:`~optim.problem.AbstractProblem`) whose geometry is
+A [`DesignProblem`][optim.design.DesignProblem] is a problem ([`AbstractProblem`][optim.problem.AbstractProblem]) whose
+geometry is
 reparametrised so that the mechanism-design constraints become bounds of the
 design box, which the optimiser's projection (and any box-bounded baseline)
 already keeps:
@@ -32,11 +33,11 @@ a rod with heavy bearing bosses at both ends more, up to the dumbbell's 1/4).
 Bounding the ratio keeps J2 physically consistent with the rod's mass and length.
 
 Objective (degrees, the Eq. 19 unit): Eq. 19 plus weighted terms from the same
-simulation, ``sum_i w_i m_i + cost``, the metrics ``m_i`` in :data:`TERMS` and
+simulation, ``sum_i w_i m_i + cost``, the metrics ``m_i`` in `TERMS` and
 the weights ``w_i`` in degrees per metric unit, plus the reciprocal clearance
-cost of :meth:`~optim.problem.AbstractProblem.cost`. All terms are RMS values over the evaluation window
+cost of [`cost`][optim.problem.AbstractProblem.cost]. All terms are RMS values over the evaluation window
 (time averages of squares), so the ensemble gradient applies to each (the windows'
-sums of squares come from :func:`optim.sensitivity.window_sums`).
+sums of squares come from [`optim.sensitivity.window_sums`][]).
 """
 
 from __future__ import annotations
@@ -116,8 +117,8 @@ def geometry(l2, alpha, stroke, iterations: int = 64):
 
 
 def terms(rms: dict) -> dict[str, Float[Array, ""]]:
-    """The :data:`TERMS` (name -> value in the unit of its name) from the RMS metrics of
-    an objective (:meth:`optim.objective.AbstractObjective.rms`), by name: the contact
+    """The `TERMS` (name -> value in the unit of its name) from the RMS metrics of
+    an objective ([`optim.objective.AbstractObjective.rms`][]), by name: the contact
     force term is the RMS over both joints, ``sqrt((F_B^2 + F_C^2) / 2)``."""
     out = {k: rms[k] for k in TERMS if k != "rms_contact_force_N"}
     out["rms_contact_force_N"] = safe_sqrt(
@@ -131,21 +132,21 @@ class DesignProblem(AbstractProblem):
     """A problem over a reparametrised geometry with the stroke, transmission and
     assembly constraints built into its box (module docstring).
 
-    Attributes (besides :class:`~optim.problem.AbstractProblem`'s):
+    Attributes (besides [`AbstractProblem`][optim.problem.AbstractProblem]'s):
         stroke: target ideal slider stroke, m (held exactly by the reparametrisation;
             the tolerance band below is what the tests and reports check).
         stroke_tolerance: allowed stroke error, m (0.1 mm).
         min_transmission_deg: smallest allowed minimum transmission angle, deg.
-        weights: ``(term, weight)`` pairs for the :data:`TERMS` besides Eq. 19 (which
+        weights: ``(term, weight)`` pairs for the `TERMS` besides Eq. 19 (which
             has weight 1), weight in degrees per unit of the term.
 
     Variable names: ``rod_length`` and ``min_transmission_angle`` (both required),
     ``rod_inertia_ratio`` (optional, then ``rod_inertia`` is derived), and any other
-    name :func:`jaxcrank.physics.params.set_parameter` accepts except ``crank_length``,
+    name [`jaxcrank.physics.params.set_parameter`][] accepts except ``crank_length``,
     ``offset``, ``rod_inertia`` and ``crank_speed`` (derived or fixing the sample grid).
 
-    In :func:`optim.optimize.optimize`'s history, ``rms_error_deg`` is the objective
-    minus the cost term: the weighted sum of all :data:`TERMS`, not Eq. 19 alone.
+    In [`optim.optimize.optimize`][]'s history, ``rms_error_deg`` is the objective
+    minus the cost term: the weighted sum of all `TERMS`, not Eq. 19 alone.
     """
 
     stroke: float = 0.240
@@ -207,7 +208,7 @@ class DesignProblem(AbstractProblem):
 
     # ------------------------------------------------------------------ model
     def weight_of(self) -> dict[str, float]:
-        """Weight of each of the :data:`TERMS`, degrees per unit of the term (Eq. 19: 1)."""
+        """Weight of each of the `TERMS`, degrees per unit of the term (Eq. 19: 1)."""
         w = dict(self.weights)
         return {t: 1.0 if t == EQ19 else float(w.get(t, 0.0)) for t in TERMS}
 
@@ -278,7 +279,7 @@ class DesignProblem(AbstractProblem):
 
     # ------------------------------------------------------------------ objective
     def terms(self, x) -> dict[str, Float[Array, ""]]:
-        """:data:`TERMS` at SI design ``x`` by the problem's objective (name -> value)."""
+        """`TERMS` at SI design ``x`` by the problem's objective (name -> value)."""
         return terms(self.objective.rms(self.mechanism(x)))
 
     def loss(self, rms: dict) -> Float[Array, ""]:
@@ -318,15 +319,15 @@ def design_problem(
     variables: Sequence[str] | None = None,
     weights=DESIGN_WEIGHTS,
 ) -> DesignProblem:
-    """A mechanism designer's problem with nine variables (:data:`DESIGN_VARIABLES`):
+    """A mechanism designer's problem with nine variables (`DESIGN_VARIABLES`):
     rod length 360-440 mm and minimum transmission angle 40-70 deg (crank length
     and offset follow from the 240 mm stroke), radial clearances at B and C
     0.1-0.5 mm (with the reciprocal manufacturing cost, reference 0.5 mm), rod
     mass 1-2.5 kg, rod inertia ratio ``J2 / (m2 L2^2)`` 0.05-0.125 (a uniform bar
     is 1/12), slider mass 1-2.5 kg, the bearings' friction coefficient 0.02-0.15
     (lubricated to dry steel) and the rod bearings' Young's modulus 100-210 GPa
-    (bronze to steel bushings). Minimises Eq. 19 + :data:`DESIGN_WEIGHTS` terms +
-    cost. ``objective``: default the steady state (:class:`optim.steady.Steady`, the
+    (bronze to steel bushings). Minimises Eq. 19 + `DESIGN_WEIGHTS` terms +
+    cost. ``objective``: default the steady state ([`optim.steady.Steady`][], the
     terms over one period of the periodic orbit). ``variables``: a subset of the names
     (the others stay at their start values, folded into the base mechanism)."""
     chosen = [v for v in DESIGN_VARIABLES if variables is None or v[0] in variables]

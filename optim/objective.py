@@ -1,27 +1,27 @@
 """The objectives of design problems, in one place: each kind a final Module of
-:class:`AbstractObjective`.
+[`AbstractObjective`][optim.objective.AbstractObjective].
 
 An objective evaluates the RMS metrics of a mechanism
-(:data:`jaxcrank.analysis.metrics.RMS_METRICS`, by name, units in the name: the
+(`jaxcrank.analysis.metrics.RMS_METRICS`, by name, units in the name: the
 paper's Eq. 19 ``rms_transmission_angle_error_deg`` among them) and decides how their
-gradient is taken. A problem (:mod:`optim.problem`) combines them into its value.
+gradient is taken. A problem ([`optim.problem`][]) combines them into its value.
 
-:class:`Pathwise`
+[`Pathwise`][optim.objective.Pathwise]
     One solve from the pins-centred start over the evaluation window ``(t_start,
     t_end]``; the metrics over its samples and their exact gradient through the whole
     solve (reverse mode). Meaningful only for windows shorter than the impact chaos'
     horizon (a few ms on the paper preset): over the paper's window the gradient is
     ~1e27 (docs/numerics.md, "Gradients beyond the first impacts").
-:class:`Ensemble`
+[`Ensemble`][optim.objective.Ensemble]
     The exact metrics of one forward solve over the window, with the
-    ensemble-sensitivity gradient (:mod:`optim.windows`): a trend estimate, finite on
+    ensemble-sensitivity gradient ([`optim.windows`][]): a trend estimate, finite on
     chaotic runs. Differentiated in forward mode by default (``window_adjoint =
     diffrax.ForwardMode()``, one tangent per design variable), which compiles several
     times faster than reverse mode for the few variables of a design problem; such an
-    objective is differentiated with :func:`value_and_grad` (``jax.jacfwd``).
-:class:`optim.steady.Steady`
+    objective is differentiated with [`value_and_grad`][optim.objective.value_and_grad] (``jax.jacfwd``).
+[`optim.steady.Steady`][]
     The metrics over one period of the steady periodic orbit, with the exact gradient
-    of the implicit function theorem at the orbit (:mod:`optim.steady`).
+    of the implicit function theorem at the orbit ([`optim.steady`][]).
 
 Eq. 19: ``F = sqrt(mean_n (alpha_n - alpha_ideal_n)^2)``, degrees, over samples at
 equal crank-angle steps (the crank turns at constant speed, so equal times are equal
@@ -61,20 +61,21 @@ class AbstractObjective(eqx.Module):
     Attributes:
         throw: a solve that cannot finish raises (True) or makes the metrics NaN
             (False: no host callback in the program, so JAX's persistent compilation
-            cache can store it; the caller checks, as :func:`optim.optimize.optimize` does).
+            cache can store it; the caller checks, as [`optim.optimize.optimize`][] does).
     """
 
     throw: eqx.AbstractVar[bool]
 
     @abc.abstractmethod
     def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
-        """The RMS metrics of ``mech`` (:data:`jaxcrank.analysis.metrics.RMS_METRICS`:
+        """The RMS metrics of ``mech`` (`jaxcrank.analysis.metrics.RMS_METRICS`:
         name -> value in the unit of its name), differentiable with respect to the
         mechanism's parameters as the kind says. Needs a concrete ``crank_speed``."""
 
     @abc.abstractmethod
     def forward_mode(self) -> bool:
-        """Whether the metrics are differentiated in forward mode (:func:`value_and_grad`)."""
+        """Whether the metrics are differentiated in forward mode
+        ([`value_and_grad`][optim.objective.value_and_grad])."""
 
     @abc.abstractmethod
     def describe(self) -> dict:
@@ -102,11 +103,13 @@ class Pathwise(AbstractObjective):
     pins-centred start, with their exact reverse-mode gradient (module docstring).
 
     Attributes:
-        t_start, t_end: evaluation window (t_start, t_end], s.
+        t_start: evaluation window (t_start, t_end], s (the same for t_end).
+        t_end: evaluation window (t_start, t_end], s (the same for t_start).
         samples_per_degree: samples per degree of crank angle, > 0.
-        rtol, atol: solver tolerances on the scaled state, > 0.
+        rtol: solver tolerances on the scaled state, > 0 (the same for atol).
+        atol: solver tolerances on the scaled state, > 0 (the same for rtol).
         max_steps: step budget of the solve.
-        throw: see :class:`AbstractObjective`.
+        throw: see [`AbstractObjective`][optim.objective.AbstractObjective].
 
     Raises:
         ParameterError: for an empty window or a non-positive sample density.
@@ -124,11 +127,11 @@ class Pathwise(AbstractObjective):
         _check_window(self.t_start, self.t_end, self.samples_per_degree)
 
     def grid(self, mech: Mechanism) -> W.Grid:
-        """The sample grid (:func:`optim.windows.sample_grid`)."""
+        """The sample grid ([`optim.windows.sample_grid`][])."""
         return W.sample_grid(mech, self.t_start, self.t_end, self.samples_per_degree)
 
     def solve(self, mech: Mechanism, throw: bool):
-        """The stored solve (:func:`optim.windows.stored_solve`) and the sample index of t_start."""
+        """The stored solve ([`optim.windows.stored_solve`][]) and the sample index of t_start."""
         opts = dict(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
         return W.stored_solve(mech, self.grid(mech), opts, throw)
 
@@ -158,12 +161,14 @@ class Pathwise(AbstractObjective):
 class Ensemble(AbstractObjective):
     """The exact metrics over the window ``(t_start, t_end]`` of one forward solve, with
     the ensemble-sensitivity gradient of K short windows re-solved from the forward
-    solve's states (:mod:`optim.windows`; a trend estimate, first order: do not take
+    solve's states ([`optim.windows`][]; a trend estimate, first order: do not take
     second derivatives of it).
 
     Attributes:
-        t_start, t_end: evaluation window (t_start, t_end], s. Default: the second
-            and third revolutions at 600 rpm, (0.1, 0.3] s.
+        t_start: evaluation window (t_start, t_end], s. Default: the second
+            and third revolutions at 600 rpm, (0.1, 0.3] s (the same for t_end).
+        t_end: evaluation window (t_start, t_end], s. Default: the second
+            and third revolutions at 600 rpm, (0.1, 0.3] s (the same for t_start).
         samples_per_degree: samples per degree of crank angle, > 0.
         window: length of each ensemble window, s; rounded to whole sample steps and
             shrunk to divide the evaluation window; in (0, t_end - t_start].
@@ -171,16 +176,17 @@ class Ensemble(AbstractObjective):
         window_max_steps: step budget of each window; a window that exceeds it is left
             out of the ensemble (more than half failing is an error, or NaN).
         window_solver: solver of the windows (a name of
-            :data:`jaxcrank.numerics.solve.SOLVERS` or a diffrax solver instance). An
+            `jaxcrank.numerics.solve.SOLVERS` or a diffrax solver instance). An
             L-stable one: an explicit solver's step sequence sits at its stability limit
             in stick phases and the derivative of its discrete solution then blows up in
             about 1 % of windows (docs/optimisation.md, "The gradient").
         window_adjoint: diffrax adjoint of the windows: ``diffrax.ForwardMode()``
-            (differentiate with :func:`value_and_grad` / ``jax.jacfwd``) or
+            (differentiate with [`value_and_grad`][optim.objective.value_and_grad] / ``jax.jacfwd``) or
             ``diffrax.RecursiveCheckpointAdjoint()`` (``jax.grad``).
-        rtol, atol: solver tolerances on the scaled state, > 0.
+        rtol: solver tolerances on the scaled state, > 0 (the same for atol).
+        atol: solver tolerances on the scaled state, > 0 (the same for rtol).
         max_steps: step budget of the long solve.
-        throw: see :class:`AbstractObjective`.
+        throw: see [`AbstractObjective`][optim.objective.AbstractObjective].
 
     Raises:
         ParameterError: for an empty window, a window outside it, or an adjoint that is
@@ -213,16 +219,16 @@ class Ensemble(AbstractObjective):
             )
 
     def grid(self, mech: Mechanism) -> W.Grid:
-        """The sample grid with the ensemble windows (:func:`optim.windows.sample_grid`)."""
+        """The sample grid with the ensemble windows ([`optim.windows.sample_grid`][])."""
         return W.sample_grid(mech, self.t_start, self.t_end, self.samples_per_degree, self.window)
 
     def _options(self) -> dict:
         return dict(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
 
     def reference(self, mech: Mechanism) -> tuple[dict[str, Float[Array, ""]], W.Starts]:
-        """One forward solve (no gradient, :func:`optim.windows.tracked_solve`): the
+        """One forward solve (no gradient, [`optim.windows.tracked_solve`][]): the
         exact RMS metrics (NaN where the solve failed and ``throw`` is False) and the
-        :class:`~optim.windows.Starts` of the ensemble windows."""
+        [`Starts`][optim.windows.Starts] of the ensemble windows."""
         grid = self.grid(mech)
         mech = jax.lax.stop_gradient(mech)
         sim = W.tracked_solve(mech, grid, self.windows, self._options(), self.throw)
@@ -235,7 +241,8 @@ class Ensemble(AbstractObjective):
         """Window ``i`` re-solved for ``mech`` from the carried-over start state: the
         sums of squares of the RMS metrics' signals over its samples (units squared; 0
         where the window failed) and whether it finished. ``grid``: the sample grid of
-        the base design (default :meth:`grid` of ``mech``, which needs a concrete crank speed)."""
+        the base design (default [`grid`][optim.objective.Ensemble.grid] of ``mech``, which needs a concrete crank
+        speed)."""
         grid = self.grid(mech) if grid is None else grid
         ts, ys, ok = W.solve_window(
             mech,

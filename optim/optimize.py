@@ -1,11 +1,11 @@
-"""Optimisation of a problem (:class:`~optim.problem.AbstractProblem`) with an
-optimiser Module (:mod:`optim.optimizers`), with a checkpoint after every iteration.
+"""Optimisation of a problem ([`AbstractProblem`][optim.problem.AbstractProblem]) with an
+optimiser Module ([`optim.optimizers`][]), with a checkpoint after every iteration.
 
 The optimiser works on the scaled design ``u`` in the unit box and on the
 objective divided by its value at the start, so step sizes mean the same for any
 problem. Feasibility: every iterate is projected onto the feasible set
-(:meth:`~optim.problem.AbstractProblem.project`, optax projections). An optional
-regime guard (``Settings.guard``, :class:`optim.steady.RegimeGuard`) halves a step
+([`project`][optim.problem.AbstractProblem.project], optax projections). An optional
+regime guard (``Settings.guard``, [`optim.steady.RegimeGuard`][]) halves a step
 whose design it refuses (a step that leaves the periodic regime), or holds the iterate.
 
 Convergence: the projected-gradient step ``|P(u - g) - u|_inf`` (g the scaled
@@ -17,8 +17,8 @@ are replaced atomically (temporary file and rename) after every iteration;
 ``resume=True`` continues from the last finished iteration, so a killed run loses at
 most the iteration in progress and, being deterministic, reproduces the uninterrupted
 history (``tests/test_faults.py`` kills runs with SIGKILL). A truncated or corrupted
-checkpoint raises :class:`jaxcrank.CorruptFileError` naming the file; it is never
-silently replaced by a fresh start (:mod:`optim.checkpoint`).
+checkpoint raises [`jaxcrank.CorruptFileError`][jaxcrank.errors.CorruptFileError] naming the file; it is never
+silently replaced by a fresh start ([`optim.checkpoint`][]).
 """
 
 from __future__ import annotations
@@ -52,18 +52,18 @@ class Settings:
     """Optimiser settings (scaled units: the design in [0, 1]^n, the objective / its start value).
 
     Attributes:
-        optimizer: the optimiser (:mod:`optim.optimizers`: ``adam(0.1)`` by default,
+        optimizer: the optimiser ([`optim.optimizers`][]: ``adam(0.1)`` by default,
             ``Projected(any optax transformation)`` or ``LBFGS()``).
         max_iterations: iteration budget, >= 1.
         gtol: stop when the projected-gradient step is below this.
         xtol: stop when the design moves less than this ``patience`` times in a row.
         patience: see ``xtol``.
-        starts: designs to optimise from (:func:`multistart`): the problem's start, then
-            ``starts - 1`` scrambled Sobol points of the box; 1 runs :func:`optimize` alone.
+        starts: designs to optimise from ([`multistart`][optim.optimize.multistart]): the problem's start, then
+            ``starts - 1`` scrambled Sobol points of the box; 1 runs [`optimize`][optim.optimize.optimize] alone.
         seed: seed of those Sobol points.
-        max_seconds: wall-time budget of one :func:`optimize` call, s (None: none); the
+        max_seconds: wall-time budget of one [`optimize`][optim.optimize.optimize] call, s (None: none); the
             run stops after the iteration that passes it.
-        guard: optional regime guard (:class:`optim.steady.RegimeGuard`): a step to a
+        guard: optional regime guard ([`optim.steady.RegimeGuard`][]): a step to a
             design it refuses is halved until accepted (at most ``guard.max_halvings``
             times, then the iterate is held).
     """
@@ -104,10 +104,10 @@ def programs(problem: AbstractProblem, penalty: float = 10.0):
     Returns ``(value_and_grad, extended)``: ``value_and_grad(u, f0) -> (value, grad (n,))``
     inside the feasible set (forward or reverse mode, as the objective says) and the
     same for L-BFGS's extension beyond it, ``extended(u, f0) -> (value, grad (n,))``. Each is traced and
-    compiled at its first call, or loaded from :mod:`jaxcrank.runs.cache` when that is
+    compiled at its first call, or loaded from [`jaxcrank.runs.cache`][] when that is
     enabled and an earlier process stored it. A failed evaluation is NaN
-    (the objective with ``throw=False`` and :func:`jaxcrank.runs.cache.checks_as_nan`: no
-    host callback in the programs, so they can be cached); :func:`optimize` checks.
+    (the objective with ``throw=False`` and [`jaxcrank.runs.cache.checks_as_nan`][]: no
+    host callback in the programs, so they can be cached); [`optimize`][optim.optimize.optimize] checks.
     """
     problem = problem.with_objective(dataclasses.replace(problem.objective, throw=False))
 
@@ -183,7 +183,7 @@ def optimize(
         stop_after: stop (as if killed) after this many iterations of this call (tests).
 
     Returns a dict: ``history`` (one dict per iteration, columns of
-    :func:`optim.checkpoint.history_columns`), ``converged`` (reason or None), ``f0`` (objective at the
+    [`optim.checkpoint.history_columns`][]), ``converged`` (reason or None), ``f0`` (objective at the
     start, degrees), ``final`` (the best SI design of the history), ``final_objective``
     (its objective, degrees) and ``last`` (the last iterate, SI).
     """
@@ -293,7 +293,7 @@ def optimize(
 
 def _steady_programs(problem: AbstractProblem, evaluator: SteadyEvaluator):
     """The steady-state objective's ``value_and_grad(u, f0)`` on the scaled design, as
-    :func:`programs` gives for the windowed objectives (NaN where the solve failed)."""
+    [`programs`][optim.optimize.programs] gives for the windowed objectives (NaN where the solve failed)."""
 
     def vg(u, f0):
         value, grad, _ = evaluator.value_and_grad(np.asarray(problem.from_unit(jnp.asarray(u))))
@@ -316,8 +316,8 @@ def _guarded(problem: AbstractProblem, guard, evaluator, u, u_new):
 
 def start_points(problem: AbstractProblem, count: int, seed: int = 0) -> np.ndarray:
     """``count`` scaled start designs, shape (count, n): the problem's own start
-    (:meth:`Problem.start_unit`), then scrambled Sobol points of the unit box (``seed``)
-    projected onto the feasible set (:meth:`Problem.project`).
+    (`Problem.start_unit`), then scrambled Sobol points of the unit box (``seed``)
+    projected onto the feasible set (`Problem.project`).
 
     Raises:
         ParameterError: for ``count < 1``.
@@ -345,8 +345,8 @@ def multistart(
     resume: bool = False,
     progress: bool = True,
 ) -> dict:
-    """Minimise ``problem`` from ``settings.starts`` designs (:func:`start_points`), one
-    run of :func:`optimize` after another, all sharing its compiled programs. For
+    """Minimise ``problem`` from ``settings.starts`` designs ([`start_points`][optim.optimize.start_points]), one
+    run of [`optimize`][optim.optimize.optimize] after another, all sharing its compiled programs. For
     objectives with several basins (impact-dominated designs often have them), the best
     of several local runs.
 
@@ -357,7 +357,7 @@ def multistart(
         resume: continue the runs in ``out``: finished starts are read back from their
             checkpoints, the interrupted one resumes, the rest run.
 
-    Returns :func:`optimize`'s dict of the best run (lowest ``final_objective``), plus
+    Returns [`optimize`][optim.optimize.optimize]'s dict of the best run (lowest ``final_objective``), plus
     ``runs`` (per start: ``start_unit``, ``final``, ``final_objective``, ``converged``,
     ``iterations``) and ``best_start`` (its index).
 

@@ -1,12 +1,12 @@
-"""Optimisers as small Modules, passed to :func:`optim.optimize.optimize` in its
-:class:`~optim.optimize.Settings` (names map to them only at the TOML/CLI boundary,
-:data:`OPTIMIZERS`).
+"""Optimisers as small Modules, passed to [`optim.optimize.optimize`][] in its
+[`Settings`][optim.optimize.Settings] (names map to them only at the TOML/CLI boundary,
+`OPTIMIZERS`).
 
 Both work on the scaled design ``u`` in the unit box and keep it feasible:
 
-- :class:`Projected`: any ``optax.GradientTransformation`` (``optax.adam(0.1)`` by
+- [`Projected`][optim.optimizers.Projected]: any ``optax.GradientTransformation`` (``optax.adam(0.1)`` by
   default), each step projected onto the feasible set, ``u <- P(u + update)``.
-- :class:`LBFGS`: ``optax.lbfgs`` with its zoom line search on the objective extended
+- [`LBFGS`][optim.optimizers.LBFGS]: ``optax.lbfgs`` with its zoom line search on the objective extended
   beyond the feasible set by ``f(P(u)) + penalty * |u - P(u)|^2`` (continuous, equal
   to f inside), the iterate projected after each step.
 """
@@ -25,7 +25,7 @@ from jaxcrank.physics.params import ParameterError
 
 
 class AbstractOptimizer(eqx.Module):
-    """An optimiser of :func:`optim.optimize.optimize`. Every subclass has a field
+    """An optimiser of [`optim.optimize.optimize`][]. Every subclass has a field
     ``label`` (str): its name in checkpoints, histories and reports (a resume checks it)."""
 
     @abc.abstractmethod
@@ -36,7 +36,7 @@ class AbstractOptimizer(eqx.Module):
     def update(self, grad, state, u, value, f0, extended):
         """``(updates, state)`` at ``u`` with the scaled ``value`` and ``grad``;
         ``extended(u, f0) -> (value, grad)`` is the objective extended beyond the
-        feasible set (:func:`optim.optimize.programs`), for a line search."""
+        feasible set ([`optim.optimize.programs`][]), for a line search."""
 
     @abc.abstractmethod
     def settings(self) -> dict:
@@ -129,7 +129,7 @@ def _line_search_function(extended):
     Why: optax's zoom line search (``optax.scale_by_zoom_linesearch``, checked against
     optax 0.2.8) differentiates ``value_fn`` with ``jax.value_and_grad`` and offers no
     argument for a function that returns value and gradient; a forward-mode objective
-    (:class:`optim.objective.Ensemble` with ``diffrax.ForwardMode``) has no reverse-mode
+    ([`optim.objective.Ensemble`][] with ``diffrax.ForwardMode``) has no reverse-mode
     derivative. A ``jax.custom_vjp`` (public JAX API) hands the line search the
     gradient the objective's own program computes."""
 
@@ -160,7 +160,7 @@ OPTIMIZERS = {"adam": (adam, ("learning_rate",)), "lbfgs": (LBFGS, ("penalty", "
 
 
 def from_settings(method: str, **kwargs) -> AbstractOptimizer:
-    """The optimiser named ``method`` (:data:`OPTIMIZERS`) with its keyword settings.
+    """The optimiser named ``method`` (`OPTIMIZERS`) with its keyword settings.
 
     Raises:
         ParameterError: for an unknown name or a setting it does not take.

@@ -122,7 +122,7 @@ def plot_landscape(grid, names, path_xs, png: Path, title="", final=None):
 
 
 def plot_tornado(result: dict, path, title: str | None = None):
-    """Tornado chart of :func:`optim.sensitivity.sensitivities`: per metric, the
+    """Tornado chart of [`optim.sensitivity.sensitivities`][]: per metric, the
     elasticities (% metric change per % parameter change), largest on top."""
     metrics = result["metrics"]
     fig, axes = plt.subplots(

@@ -1,12 +1,12 @@
 """Design problems: which parameters vary, within which bounds and linear
 constraints, and what is minimised.
 
-:class:`AbstractProblem` holds what every problem shares (variables, bounds, linear
+[`AbstractProblem`][optim.problem.AbstractProblem] holds what every problem shares (variables, bounds, linear
 constraints, the objective instance, the cost term, the scaling and the projection);
 its final subclasses say how a design becomes a mechanism and how the objective's
-metrics become the problem's value: :class:`ParameterProblem` (mechanism parameters
+metrics become the problem's value: [`ParameterProblem`][optim.problem.ParameterProblem] (mechanism parameters
 directly, Eq. 19, optionally averaged over manufactured parts) here, and
-:class:`optim.design.DesignProblem` (a reparametrised geometry with nonlinear
+[`optim.design.DesignProblem`][] (a reparametrised geometry with nonlinear
 constraints held by its box, weighted terms).
 
 Variables are scaled to the unit box, ``u = (x - lower) / (upper - lower)``, so
@@ -42,13 +42,16 @@ class AbstractProblem(abc.ABC):
     Attributes:
         base: the mechanism every design starts from (fixed parameters).
         names: design variable names.
-        lower, upper: bounds, SI units of each variable.
-        A, b: linear inequality constraints ``A x <= b`` (SI), shape (m, n) and (m,).
+        lower: bounds, SI units of each variable (the same for upper).
+        upper: bounds, SI units of each variable (the same for lower).
+        A: linear inequality constraints ``A x <= b`` (SI), shape (m, n) and (m,) (the same for b).
+        b: linear inequality constraints ``A x <= b`` (SI), shape (m, n) and (m,) (the same for A).
         start: start design, SI (default: the subclass's default start projected onto the set).
-        objective: how the mechanism is measured (an :class:`optim.objective.AbstractObjective`).
+        objective: how the mechanism is measured (an [`optim.objective.AbstractObjective`][]).
         cost_weight: weight of the manufacturing-cost term, degrees (0: none).
         cost_reference: reference clearance of the cost term, m.
-        title: a short description for plots and reports (see :attr:`description`).
+        title: a short description for plots and reports (see [`description`][optim.problem.AbstractProblem.description]
+            ).
 
     Raises:
         ParameterError: on construction, for inconsistent sizes, empty bounds, an
@@ -114,12 +117,13 @@ class AbstractProblem(abc.ABC):
     @abc.abstractmethod
     def loss(self, rms: dict) -> Float[Array, ""]:
         """The problem's value (degrees, without the cost term) from the objective's RMS
-        metrics (:meth:`optim.objective.AbstractObjective.rms`)."""
+        metrics ([`optim.objective.AbstractObjective.rms`][])."""
 
     @abc.abstractmethod
     def objective_value(self, x: Float[ArrayLike, " n"]) -> Float[Array, ""]:
-        """Total objective at SI design ``x``, degrees: :meth:`loss` + :meth:`cost`.
-        Differentiate it with :meth:`value_and_grad`."""
+        """Total objective at SI design ``x``, degrees: [`loss`][optim.problem.AbstractProblem.loss] +
+        [`cost`][optim.problem.AbstractProblem.cost] .
+        Differentiate it with [`value_and_grad`][optim.problem.AbstractProblem.value_and_grad]."""
 
     @property
     @abc.abstractmethod
@@ -205,15 +209,15 @@ class AbstractProblem(abc.ABC):
 @dataclasses.dataclass(frozen=True)
 class ParameterProblem(AbstractProblem):
     """Mechanism parameters as the variables (any name
-    :func:`jaxcrank.physics.params.set_parameter` accepts), Eq. 19 as the value, and
+    [`jaxcrank.physics.params.set_parameter`][] accepts), Eq. 19 as the value, and
     optionally the mean over manufactured parts (robust design).
 
-    Attributes (besides :class:`AbstractProblem`'s):
+    Attributes (besides [`AbstractProblem`][optim.problem.AbstractProblem]'s):
         scatter: manufacturing scatter for the robust objective, one
             ``(name, tolerance, distribution)`` per parameter: the part's value is the
             design's (or the base's) value plus a deviation within ``+-tolerance`` (SI),
             ``"uniform"`` over the band or ``"normal"`` with the band as +-3 sigma
-            (:class:`jaxcrank.runs.sampling.Tolerance`).
+            ([`jaxcrank.runs.sampling.Tolerance`][]).
         samples: number of manufactured parts the robust objective averages over
             (0: the nominal design alone). With ``samples > 0`` the Eq. 19 part of the
             objective is the Monte Carlo mean over ``samples`` parts, the same draws at
@@ -280,7 +284,7 @@ class ParameterProblem(AbstractProblem):
 
     def draws(self) -> Float[np.ndarray, "samples scatter"]:
         """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI:
-        the Monte Carlo draws of :func:`jaxcrank.runs.sampling.monte_carlo` about a zero nominal."""
+        the Monte Carlo draws of [`jaxcrank.runs.sampling.monte_carlo`][] about a zero nominal."""
         if not self.scatter:
             return np.zeros((self.samples, 0))
         tolerances = {name: Tolerance(0.0, tol, dist) for name, tol, dist in self.scatter}
@@ -288,7 +292,7 @@ class ParameterProblem(AbstractProblem):
 
     def part(self, x: Float[ArrayLike, " n"], deviation: Float[ArrayLike, " scatter"]) -> Mechanism:
         """The manufactured part of SI design ``x`` with ``deviation`` (one row of
-        :meth:`draws`): each scattered parameter at its design (or base) value plus
+        [`draws`][optim.problem.ParameterProblem.draws]): each scattered parameter at its design (or base) value plus
         its deviation (traceable)."""
         mech = self.mechanism(x)
         names = [nm for nm, _, _ in self.scatter]
@@ -329,7 +333,8 @@ def tolerance_problem(
 ) -> ParameterProblem:
     """Tolerance allocation: radial clearances c_B, c_C in [0.1, 0.5] mm at the
     paper's geometry, minimising RMS transmission-angle error + manufacturing cost
-    (:meth:`AbstractProblem.cost`, reference clearance 0.5 mm). Start: 0.4 mm at both."""
+    ([`AbstractProblem.cost`][optim.problem.AbstractProblem.cost], reference clearance 0.5 mm). Start: 0.4 mm at
+    both."""
     return ParameterProblem(
         base=paper(),
         names=("clearance_B", "clearance_C"),
@@ -358,7 +363,7 @@ def robust_problem(
 ) -> ParameterProblem:
     """The paper's L1, L2 problem under manufacturing tolerances: minimise the
     expected RMS transmission-angle error over ``samples`` parts drawn from
-    :data:`ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
+    `ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
     p = paper_problem(objective, start)
     return dataclasses.replace(
         p, scatter=ROBUST_SCATTER, samples=samples, seed=seed, title="robust: expected RMS transmission-angle error"

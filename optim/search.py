@@ -3,7 +3,7 @@ the ``vmap`` grid search (ground truth for the optimiser and its gradient-free
 baseline) and the batched evaluations the 1-D scans use.
 
 Each design is one forward solve from the pins-centred start (the
-:class:`~optim.objective.Pathwise` value over the objective's window, which is the
+[`Pathwise`][optim.objective.Pathwise] value over the objective's window, which is the
 windowed objectives' value) plus the cost term; for a robust
 problem (``Problem.samples > 0``) the mean over its manufactured parts. Designs are
 solved ``chunk`` at a time under ``vmap`` so memory stays bounded; a design whose
@@ -29,13 +29,13 @@ from .problem import AbstractProblem as Problem
 
 
 def pathwise_of(objective: AbstractObjective) -> Pathwise:
-    """The :class:`~optim.objective.Pathwise` objective over the same window and
+    """The [`Pathwise`][optim.objective.Pathwise] objective over the same window and
     tolerances as ``objective`` (a windowed one: pathwise or ensemble), whose value is
     the objective's value.
 
     Raises:
         ParameterError: ``objective`` has no evaluation window (the steady state: evaluate
-            its designs with :mod:`optim.steady`).
+            its designs with [`optim.steady`][]).
     """
     if isinstance(objective, Pathwise):
         return objective
@@ -106,7 +106,7 @@ def rms_errors(
 
 @dataclasses.dataclass
 class Grid:
-    """Result of :func:`grid_search` over two variables.
+    """Result of [`grid_search`][optim.search.grid_search] over two variables.
 
     Attributes: axes (2 arrays, SI), values (n0, n1) objective incl. cost, degrees
     (NaN where infeasible or failed), errors (n0, n1) the Eq. 19 part alone, feasible
@@ -137,7 +137,7 @@ def grid_search(
     """Evaluate an ``n`` x ``n`` grid over the box of a two-variable problem.
 
     ``errors``: the (n, n) Eq. 19 values of the same grid from an earlier run of
-    the same objective (:func:`read_grid`); the cost term is then recomputed, so a
+    the same objective ([`read_grid`][optim.search.read_grid]); the cost term is then recomputed, so a
     landscape can be reused with another ``cost_weight``."""
     if problem.n != 2:
         raise ValueError("grid_search needs a two-variable problem")
@@ -193,7 +193,7 @@ def write_grid(path, problem: Problem, grid: Grid):
 
 
 def read_grid(path, problem: Problem, n: int) -> Float[np.ndarray, "points points"]:
-    """The (n, n) Eq. 19 errors of a ``grid.csv`` written by :func:`write_grid` for
+    """The (n, n) Eq. 19 errors of a ``grid.csv`` written by [`write_grid`][optim.search.write_grid] for
     the same variables and box (checked); NaN where infeasible or failed."""
     import csv
 

@@ -1,12 +1,12 @@
 """Local sensitivities of the mean-square metrics by AD, in one call.
 
 ``sensitivities(mech)`` gives, at one design, the value of each metric in
-:data:`METRICS` and its gradient with respect to every parameter in ``names``
-(any name :func:`jaxcrank.physics.params.set_parameter` accepts), plus the normalised
+`METRICS` and its gradient with respect to every parameter in ``names``
+(any name [`jaxcrank.physics.params.set_parameter`][] accepts), plus the normalised
 elasticities ``(dm/dp) (p / m)`` (percent change of the metric per percent change
-of the parameter), which :func:`optim.plots.plot_tornado` draws as a tornado chart.
+of the parameter), which [`optim.plots.plot_tornado`][] draws as a tornado chart.
 
-The same care as the optimisation (:class:`optim.objective.Ensemble`): over the paper's
+The same care as the optimisation ([`optim.objective.Ensemble`][]): over the paper's
 window the pathwise derivative of a chaotic trajectory is ~1e27 and meaningless;
 the gradient here is the ensemble-sensitivity estimate. One solve at the design
 gives the exact metric values and the pins' states in their bearings at the start
@@ -20,7 +20,7 @@ Valid for: time averages of squares, i.e. the RMS metrics (transmission-angle
 error, rod-centre and slider x deviation, driving-moment deviation, contact forces
 at B and C). Not valid for: peaks (largest contact force, largest deviation,
 largest acceleration): an extreme value over chaotic impacts has no trend-following
-local derivative (use a sweep over a band, :mod:`jaxcrank.runs.sweep`, for those).
+local derivative (use a sweep over a band, [`jaxcrank.runs.sweep`][], for those).
 """
 
 from __future__ import annotations
@@ -61,8 +61,8 @@ PARAMETERS = (
 
 
 def metric_values(sim: Simulation) -> Float[Array, " metrics"]:
-    """:data:`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
-    :mod:`jaxcrank.numerics.tracking`), stacked in the order of :data:`METRICS`, in their units."""
+    """`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
+    [`jaxcrank.numerics.tracking`][]), stacked in the order of `METRICS`, in their units."""
     return jnp.stack([sim.metrics[k] for k in METRICS])
 
 
@@ -70,15 +70,15 @@ def window_sums(
     base: Mechanism, names, x: Float[ArrayLike, " params"], starts: W.Starts, i: Int[ArrayLike, ""], obj: Ensemble
 ) -> tuple[Float[Array, " metrics"], Bool[Array, ""]]:
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
-    carried-over start state (:meth:`optim.objective.Ensemble.window_sums`): the sums of
+    carried-over start state ([`optim.objective.Ensemble.window_sums`][]): the sums of
     squares of the metrics' signals over its samples, stacked in the order of
-    :data:`METRICS` (units squared), and whether it finished."""
+    `METRICS` (units squared), and whether it finished."""
     sums, ok = obj.window_sums(set_parameters(base, names, x), starts, i, obj.grid(base))
     return jnp.stack([sums[k] for k in METRICS]), ok
 
 
 def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Ensemble = Ensemble()) -> dict:
-    """Values, gradients and elasticities of :data:`METRICS` at ``mech`` over the
+    """Values, gradients and elasticities of `METRICS` at ``mech`` over the
     objective's window (``obj``: window, ensemble windows, solver, tolerances).
 
     Returns a dict: ``names``, ``units`` (of each parameter), ``x`` (SI values),

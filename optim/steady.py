@@ -3,25 +3,25 @@ orbit, with their exact gradient; the regime guard and the regime-classified sta
 the optimiser.
 
 A machine runs for hours: its designer cares about the motion it settles into, not the
-start-up from rest. :class:`Steady` measures a design there
-(:func:`jaxcrank.steady_state`):
+start-up from rest. [`Steady`][optim.steady.Steady] measures a design there
+([`jaxcrank.steady_state`][jaxcrank.numerics.steady.steady_state]):
 
 - **periodic regime** (an attracting periodic orbit of period k revolutions): the RMS
   metrics over one period of the orbit, Eq. 19 and the design terms among them, and
   their exact gradient by the implicit function theorem at the orbit,
   ``dy*/dp = (I - M)^-1 dPhi^k/dp`` on the dynamic subspace
-  (:func:`jaxcrank.numerics.steady.orbit_start`), then forward mode through one
+  ([`jaxcrank.numerics.steady.orbit_start`][]), then forward mode through one
   period from y*. Each evaluation is warm-started from the previous design's orbit, so
   an optimiser's step costs a few one-revolution solves.
 - **not periodic** (chaotic impacts): the long-run statistical value of the metrics
   (batch means over revolutions, with a 95 % confidence interval), reported as such;
   its gradient is the ensemble estimate of the objective's ``trend`` (an
-  :class:`~optim.objective.Ensemble`), flagged as a trend estimate, or zero without one.
+  [`Ensemble`][optim.objective.Ensemble]), flagged as a trend estimate, or zero without one.
 
 The steady state is found on the host (settle, period detection, Newton shooting), so
 this objective is evaluated at concrete designs, outside ``jax.jit``: use
-:class:`SteadyEvaluator` (what :func:`optim.optimize.optimize` does) or
-:meth:`Steady.rms` with a concrete mechanism.
+[`SteadyEvaluator`][optim.steady.SteadyEvaluator] (what [`optim.optimize.optimize`][] does) or
+[`Steady.rms`][optim.steady.Steady.rms] with a concrete mechanism.
 """
 
 from __future__ import annotations
@@ -57,13 +57,16 @@ class Steady(AbstractObjective):
         max_newton: Newton iterations at most.
         samples_per_revolution: samples per revolution of the orbit's RMS metrics (equal
             crank-angle steps), >= 2.
-        statistics_revolutions, batch_revolutions: not periodic: revolutions of the
-            long-run statistics and per batch of their batch means.
-        rtol, atol: solver tolerances on the scaled state, > 0 (shooting needs tight ones).
+        statistics_revolutions: not periodic: revolutions of the
+            long-run statistics and per batch of their batch means (the same for batch_revolutions).
+        batch_revolutions: not periodic: revolutions of the
+            long-run statistics and per batch of their batch means (the same for statistics_revolutions).
+        rtol: solver tolerances on the scaled state, > 0 (shooting needs tight ones) (the same for atol).
+        atol: solver tolerances on the scaled state, > 0 (shooting needs tight ones) (the same for rtol).
         max_steps: step budget of each solve of the steady-state search (a design that
             needs more is a failed evaluation: NaN, or raises with ``throw``).
         trend: not periodic: the objective whose gradient serves as a trend estimate
-            (an :class:`~optim.objective.Ensemble`; None: zero gradient there).
+            (an [`Ensemble`][optim.objective.Ensemble]; None: zero gradient there).
         throw: a failed steady-state solve raises (True) or gives NaN values (False).
 
     Raises:
@@ -97,8 +100,9 @@ class Steady(AbstractObjective):
         return STEADY_DEFAULTS.replace(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
 
     def solve(self, mech: Mechanism, warm_start=None) -> S.SteadyState:
-        """The steady state of the concrete ``mech`` (:func:`jaxcrank.steady_state`), warm
-        started from a previous :class:`jaxcrank.SteadyState` when given.
+        """The steady state of the concrete ``mech`` ([`jaxcrank.steady_state`][jaxcrank.numerics.steady.steady_state]),
+        warm
+        started from a previous [`jaxcrank.SteadyState`][jaxcrank.numerics.steady.SteadyState] when given.
 
         Raises:
             jaxcrank.SteadyStateError: the solve failed and ``throw`` is True."""
@@ -119,7 +123,7 @@ class Steady(AbstractObjective):
     def rms_at(self, mech: Mechanism, steady: S.SteadyState) -> dict[str, Float[Array, ""]]:
         """The RMS metrics of ``mech`` (traceable; e.g. built from traced design
         variables) given ``steady``, the steady state of its concrete value: periodic, the
-        metrics over one period from :func:`jaxcrank.numerics.steady.orbit_start` (exact
+        metrics over one period from [`jaxcrank.numerics.steady.orbit_start`][] (exact
         forward-mode gradient); not periodic, the long-run statistics' values with the
         ``trend`` objective's gradient (or none); NaN when the solve failed."""
         if not steady.ok:
@@ -143,7 +147,8 @@ class Steady(AbstractObjective):
         return {k: values[k] + (surrogate[k] - sg(surrogate[k])) for k in RMS_METRICS}
 
     def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
-        """The RMS metrics of a concrete ``mech`` (:meth:`solve` then :meth:`rms_at`)."""
+        """The RMS metrics of a concrete ``mech`` ([`solve`][optim.steady.Steady.solve] then
+        [`rms_at`][optim.steady.Steady.rms_at] )."""
         return self.rms_at(mech, self.solve(mech))
 
     def forward_mode(self) -> bool:
@@ -156,7 +161,7 @@ class Steady(AbstractObjective):
 
 
 def _light(steady: S.SteadyState) -> S.SteadyState:
-    """``steady`` without what :func:`jaxcrank.numerics.steady.orbit_start` does not need
+    """``steady`` without what [`jaxcrank.numerics.steady.orbit_start`][] does not need
     (the orbit, metrics, statistics and the settle's points), hashable for ``jit``."""
     return dataclasses.replace(
         steady,
@@ -196,12 +201,12 @@ _PROGRAMS: dict = {}
 
 
 class SteadyEvaluator:
-    """Value and exact gradient of a problem measured by a :class:`Steady` objective, at
+    """Value and exact gradient of a problem measured by a [`Steady`][optim.steady.Steady] objective, at
     concrete designs, each steady state warm-started from the last periodic one.
 
     Args:
-        problem: a problem (:class:`~optim.problem.AbstractProblem`) whose objective is
-            a :class:`Steady`; a parameter problem without manufacturing scatter.
+        problem: a problem ([`AbstractProblem`][optim.problem.AbstractProblem]) whose objective is
+            a [`Steady`][optim.steady.Steady]; a parameter problem without manufacturing scatter.
 
     Raises:
         ParameterError: for another objective, or a problem with manufacturing scatter.
@@ -236,7 +241,7 @@ class SteadyEvaluator:
     def value(self, x) -> tuple[float, dict]:
         """``(value, regime)`` at SI design ``x`` without a gradient: the objective in
         degrees over the orbit the steady-state solve computed (periodic), or the long-run
-        statistics' value (not periodic; NaN when the solve failed), and :func:`report`."""
+        statistics' value (not periodic; NaN when the solve failed), and [`report`][optim.steady.report]."""
         steady = self.steady_at(x)
         info = self.last_report = report(steady)
         if not steady.ok:
@@ -273,7 +278,7 @@ class SteadyEvaluator:
 
     def value_and_grad(self, x) -> tuple[float, np.ndarray, dict]:
         """``(value, gradient, regime)`` at SI design ``x``: the objective in degrees, its
-        gradient in degrees per SI unit of each variable, and :func:`report` of the
+        gradient in degrees per SI unit of each variable, and [`report`][optim.steady.report] of the
         steady state. Not periodic: the long-run value and the trend estimate (or zero)."""
         x = np.asarray(x, dtype=float)
         steady = self.steady_at(x)

@@ -1,5 +1,5 @@
-"""The ensemble-sensitivity machinery behind :class:`optim.objective.Ensemble` and
-:mod:`optim.sensitivity`: the sample grid of an evaluation window, the forward solves
+"""The ensemble-sensitivity machinery behind [`optim.objective.Ensemble`][] and
+[`optim.sensitivity`][]: the sample grid of an evaluation window, the forward solves
 that store the start states of K short windows, the windows re-solved from those
 states (held fixed, carried over to the design being differentiated), and their
 assembly.
@@ -49,7 +49,7 @@ class Grid(NamedTuple):
 def sample_grid(
     mech: Mechanism, t_start: float, t_end: float, samples_per_degree: float, window: float | None = None
 ) -> Grid:
-    """The :class:`Grid` of the window ``(t_start, t_end]`` (s) with ``samples_per_degree``
+    """The [`Grid`][optim.windows.Grid] of the window ``(t_start, t_end]`` (s) with ``samples_per_degree``
     samples per degree of crank angle; ``window`` (s) is the ensemble windows' length,
     rounded to whole sample steps and shrunk to divide the evaluation window.
 
@@ -77,7 +77,7 @@ def sample_grid(
 
 
 def rms_signal_values(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> dict:
-    """The per-sample signals behind :data:`jaxcrank.analysis.metrics.RMS_METRICS` at
+    """The per-sample signals behind `jaxcrank.analysis.metrics.RMS_METRICS` at
     sample times ``ts`` (s) with scaled states ``ys``: RMS metric name -> (n,) signal in
     the metric's unit (deg, m, N m, N)."""
 
@@ -97,7 +97,8 @@ def stored_solve(mech: Mechanism, grid: Grid, options: dict, throw: bool) -> tup
 
 
 class Starts(NamedTuple):
-    """Pin-in-bearing states at the start of the ensemble windows (no gradient), from :func:`window_starts`.
+    """Pin-in-bearing states at the start of the ensemble windows (no gradient), from
+    [`window_starts`][optim.windows.window_starts] .
 
     Attributes: t (K,) s; eccentricity (K, 2, 2) m and eccentricity_rate (K, 2, 2)
     m/s for joints (B, C); rest (K, 4) the other state entries in SI units
@@ -122,9 +123,9 @@ def window_start_indices(grid: Grid, windows: int) -> np.ndarray:
 
 def tracked_solve(mech: Mechanism, grid: Grid, windows: int, options: dict, throw: bool) -> Simulation:
     """One solve from the pins-centred start over ``grid`` that stores the state only at
-    the ensemble windows' starts (:func:`window_start_indices`) and tracks the headline
+    the ensemble windows' starts ([`window_start_indices`][optim.windows.window_start_indices]) and tracks the headline
     metrics over the samples in (t_start, t_end] during the solve
-    (:mod:`jaxcrank.numerics.tracking`): memory independent of the number of samples.
+    ([`jaxcrank.numerics.tracking`][]): memory independent of the number of samples.
     Forward mode only. ``options``: ``rtol``, ``atol``, ``max_steps``."""
     ts = grid.dt * np.arange(grid.n_start + grid.n_eval + 1)
     return simulate(
@@ -138,7 +139,8 @@ def tracked_solve(mech: Mechanism, grid: Grid, windows: int, options: dict, thro
 
 
 def window_starts(sim: Simulation) -> Starts:
-    """The :class:`Starts` of the ensemble windows from a :func:`tracked_solve`, whose
+    """The [`Starts`][optim.windows.Starts] of the ensemble windows from a
+    [`tracked_solve`][optim.windows.tracked_solve] , whose
     stored samples are the windows' starts (no gradient)."""
     mech = jax.lax.stop_gradient(sim.mechanism)
     t0s, y0s = sim.ts, sim.ys
@@ -171,7 +173,7 @@ def solve_window(
     options: dict,
     max_steps: int,
 ) -> tuple[Float[Array, " window"], Float[Array, "window state"], Bool[Array, ""]]:
-    """Window ``i`` re-solved for ``mech`` from :func:`start_state` with ``solver`` and
+    """Window ``i`` re-solved for ``mech`` from [`start_state`][optim.windows.start_state] with ``solver`` and
     ``adjoint`` (diffrax): its sample times (n_window,) s, scaled states (zero where the
     solve failed, so a failed window is reported by the caller, not propagated as NaN)
     and whether it finished within ``max_steps``. ``options``: ``rtol``, ``atol``."""

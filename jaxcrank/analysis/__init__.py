@@ -1,3 +1,3 @@
 """The analysis: metric definitions, outputs as functions of a solution, and the
 validation rigs (impact harness, approach-speed audit). Builds on
-:mod:`jaxcrank.physics` and :mod:`jaxcrank.numerics`."""
+[`jaxcrank.physics`][] and [`jaxcrank.numerics`][]."""

@@ -1,7 +1,7 @@
 """Headline metrics of a run: the one definition used by ``jaxcrank simulate``'s
 summary, sweep tables, sensitivities and design objectives.
 
-A metric reduces one per-sample *signal* (:func:`signals`) over the samples of a
+A metric reduces one per-sample *signal* ([`signals`][jaxcrank.analysis.metrics.signals]) over the samples of a
 window ``t > t_start``:
 
 - ``max_abs``: the largest absolute value;
@@ -45,8 +45,8 @@ class Metric(NamedTuple):
     """How one headline metric is computed (its units are its name's suffix).
 
     Attributes:
-        reduction: ``"max_abs"``, ``"max"`` or ``"rms"`` (:func:`reduce_signal`).
-        signal: the name of the per-sample signal it reduces (:data:`SIGNALS`).
+        reduction: ``"max_abs"``, ``"max"`` or ``"rms"`` ([`reduce_signal`][jaxcrank.analysis.metrics.reduce_signal]).
+        signal: the name of the per-sample signal it reduces (`SIGNALS`).
         meaning: what it measures, for people.
     """
 
@@ -122,7 +122,7 @@ def transmission_angle_deviation(
 
 
 def signals(frame: Frame) -> dict[str, Float[Array, "*samples"]]:
-    """The per-sample signals of :data:`SIGNALS` from a :class:`jaxcrank.physics.model.Frame`
+    """The per-sample signals of `SIGNALS` from a [`jaxcrank.physics.model.Frame`][jaxcrank.physics.frame.Frame]
     (one instant, or arrays of them along a leading axis), SI units and degrees."""
     q, qi = frame.q, frame.ideal_q
     return {
@@ -156,12 +156,12 @@ def reduce_signal(reduction: str, x: Float[Array, " n"], window: Float[Array, " 
 
 
 def headline(frames: Frame, t_start: Float[ArrayLike, ""]) -> dict[str, Float[Array, ""]]:
-    """:data:`METRICS` over the samples of ``frames`` (a :class:`jaxcrank.physics.model.Frame`
-    of arrays, e.g. :func:`jaxcrank.analysis.outputs.frames`) with time ``t > t_start`` (s).
+    """`METRICS` over the samples of ``frames`` (a [`jaxcrank.physics.model.Frame`][jaxcrank.physics.frame.Frame]
+    of arrays, e.g. [`jaxcrank.analysis.outputs.frames`][]) with time ``t > t_start`` (s).
 
     Returns a dict of scalars in the units of each name. Traceable. A window without
     samples gives 0 for ``max_abs`` and ``rms`` metrics and -inf for ``max`` ones:
-    callers that may pass such a window check it first (:func:`window_samples`).
+    callers that may pass such a window check it first ([`window_samples`][jaxcrank.analysis.metrics.window_samples]).
     """
     window = frames.t > t_start
     sig = signals(frames)
@@ -174,8 +174,8 @@ def window_samples(ts: Float[ArrayLike, " n"], t_start: Float[ArrayLike, ""]) ->
 
 
 def rms_signals(frame: Frame) -> Float[Array, "*samples rms"]:
-    """The signals behind :data:`RMS_METRICS`, stacked in that order along the last axis
-    (:func:`by_name` names the columns again)."""
+    """The signals behind `RMS_METRICS`, stacked in that order along the last axis
+    ([`by_name`][jaxcrank.analysis.metrics.by_name] names the columns again)."""
     sig = signals(frame)
     return jnp.stack([sig[METRICS[k].signal] for k in RMS_METRICS], axis=-1)
 
@@ -187,8 +187,9 @@ def stack(names: Sequence[str], values) -> Float[Array, "*batch metrics"]:
 
 
 def by_name(names: Sequence[str], vector: Float[ArrayLike, "*batch metrics"]) -> dict[str, Float[Array, "*batch"]]:
-    """A vector of metrics (last axis in the order of ``names``, e.g. :data:`RMS_METRICS`
-    for :func:`rms_signals`) as a dict metric name -> array: the one way a metric is read
+    """A vector of metrics (last axis in the order of ``names``, e.g. `RMS_METRICS`
+    for [`rms_signals`][jaxcrank.analysis.metrics.rms_signals] ) as a dict metric name -> array: the one way a metric is
+    read
     back out of a vector, so no caller indexes it by position.
 
     Raises:

@@ -1,9 +1,9 @@
-"""Outputs as functions of a :class:`~jaxcrank.numerics.solve.Simulation`.
+"""Outputs as functions of a [`Simulation`][jaxcrank.numerics.solve.Simulation].
 
-:func:`frames` evaluates the model at every sample (accelerations come from the
-vector field, not from finite differences); :func:`trajectory` turns that into
-named columns with units; :func:`summary_metrics` gives the headline numbers of
-:mod:`jaxcrank.analysis.metrics` for a run's summary.
+[`frames`][jaxcrank.analysis.outputs.frames] evaluates the model at every sample (accelerations come from the
+vector field, not from finite differences); [`trajectory`][jaxcrank.analysis.outputs.trajectory] turns that into
+named columns with units; [`summary_metrics`][jaxcrank.analysis.outputs.summary_metrics] gives the headline numbers of
+[`jaxcrank.analysis.metrics`][] for a run's summary.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def _frames(mech, ts, ys):
 
 def frames(sim: Simulation) -> model.Frame:
     """The model evaluated at every sample time of ``sim``: a
-    :class:`jaxcrank.physics.model.Frame` of arrays with a leading axis of length n (samples).
+    [`jaxcrank.physics.model.Frame`][jaxcrank.physics.frame.Frame] of arrays with a leading axis of length n (samples).
 
     One compiled program with the parameters traced, so every mechanism of the same
     structure and sample count reuses it."""
@@ -83,7 +83,7 @@ def frames(sim: Simulation) -> model.Frame:
 
 
 def trajectory(sim: Simulation) -> dict[str, Float[np.ndarray, " n"]]:
-    """Named output columns (units in :data:`COLUMNS`; SI, angles in degrees)."""
+    """Named output columns (units in `COLUMNS`; SI, angles in degrees)."""
     f = frames(sim)
     cols = {
         "t": f.t,
@@ -159,8 +159,8 @@ _headline = jax.jit(headline)
 
 def summary_metrics(sim: Simulation) -> dict[str, float]:
     """The headline metrics a solve tracked (``simulate(..., metrics_start=...)``,
-    :mod:`jaxcrank.numerics.tracking`) as Python floats: ``window_start_s``, every metric of
-    :data:`jaxcrank.analysis.metrics.METRICS` and the whole run's peak contact forces
+    [`jaxcrank.numerics.tracking`][]) as Python floats: ``window_start_s``, every metric of
+    `jaxcrank.analysis.metrics.METRICS` and the whole run's peak contact forces
     (``peak_contact_force_{B,C}_whole_run_N``); units in the names.
 
     Raises:
@@ -172,10 +172,10 @@ def summary_metrics(sim: Simulation) -> dict[str, float]:
 
 
 def sample_metrics(sim: Simulation, t_start: Float[ArrayLike, ""]) -> dict[str, float]:
-    """The headline metrics (:data:`jaxcrank.analysis.metrics.METRICS`) over the stored
+    """The headline metrics (`jaxcrank.analysis.metrics.METRICS`) over the stored
     samples of ``sim`` with ``t > t_start`` (s), as Python floats: the peaks are
     maxima over the samples, not over the solve (for solves that were not tracked,
-    e.g. another package's solution wrapped in a :class:`Simulation`).
+    e.g. another package's solution wrapped in a [`Simulation`][jaxcrank.numerics.solve.Simulation]).
 
     Raises:
         ParameterError: if no sample lies after ``t_start``.

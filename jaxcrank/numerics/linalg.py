@@ -2,7 +2,7 @@
 
 XLA never compiles a while loop that contains a custom call (LAPACK's ``getrf``
 behind ``jnp.linalg.inv`` and ``jax.scipy.linalg.lu_factor``) into one kernel
-(:mod:`jaxcrank.numerics.runtime`), so an implicit solver that factorises its 10 x 10
+([`jaxcrank.numerics.runtime`][]), so an implicit solver that factorises its 10 x 10
 iteration matrix with LAPACK keeps the whole solver loop on XLA's slower thunk
 runtime. For matrices this small, elimination written as array operations costs
 less than the call did; the 2 x 2 systems of the equations of motion and the
@@ -47,14 +47,15 @@ def solve_2x2(a, b):
 
 
 class _Transposed(eqx.Module):
-    """Whether a :class:`DenseInverse` state solves with the transposed operator (static)."""
+    """Whether a [`DenseInverse`][jaxcrank.numerics.linalg.DenseInverse] state solves with the transposed operator
+    (static)."""
 
     value: bool = eqx.field(static=True)
 
 
 class DenseInverse(lx.AbstractLinearSolver):
     """A lineax solver for small square systems whose vectors are 1-D arrays: the
-    operator is inverted once (:func:`inverse`) and every solve is a product with
+    operator is inverted once ([`inverse`][jaxcrank.numerics.linalg.inverse]) and every solve is a product with
     the inverse. Use it where lineax's LU would be a LAPACK call inside a solver loop
     (e.g. the chord Newton iterations of diffrax's implicit Runge-Kutta solvers)."""
 

@@ -13,7 +13,7 @@ Method: Rodas4 of Hairer & Wanner (Solving ODEs II, 2nd ed., Sec. IV.7; the
 coefficients of their code RODAS, in the transformed form with stage
 increments ``k_i``), order 4 with an embedded order-3 solution (the error
 estimate is the last stage), six stages, one Jacobian and one matrix inverse
-per step (:func:`jaxcrank.numerics.linalg.inverse`, plain array operations, so that XLA can
+per step ([`jaxcrank.numerics.linalg.inverse`][], plain array operations, so that XLA can
 compile the solver loop into one kernel), L-stable and stiffly accurate, with the method's order-3 dense output
 (like the stages, the dense output loses order on stiff components when a step
 is much longer than their time constant; the step-end values do not).

@@ -1,6 +1,6 @@
 """The XLA CPU options jaxcrank runs with, applied when jaxcrank is imported.
 
-Two options are added to ``XLA_FLAGS`` by :func:`configure` (on x86 machines):
+Two options are added to ``XLA_FLAGS`` by [`configure`][jaxcrank.numerics.runtime.configure] (on x86 machines):
 
 - ``--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=1e9``: XLA
   compiles a diffrax solver loop into one kernel instead of dispatching each of its
@@ -13,7 +13,7 @@ Two options are added to ``XLA_FLAGS`` by :func:`configure` (on x86 machines):
 
 They are not added when the user's ``XLA_FLAGS`` already sets them (the user's values
 win), when ``JAXCRANK_KEEP_XLA_FLAGS=1``, or when JAX's backend has already started
-(XLA reads ``XLA_FLAGS`` once; :func:`configure` then warns). Neither option changes
+(XLA reads ``XLA_FLAGS`` once; [`configure`][jaxcrank.numerics.runtime.configure] then warns). Neither option changes
 what is computed, only how it is rounded. The measurements behind them are in the
 docs ("XLA runtime").
 """
@@ -66,7 +66,7 @@ def _backend_started() -> bool:
 
 def configure(environ=os.environ, machine: str | None = None) -> str:
     """Add the options to ``environ["XLA_FLAGS"]`` if they can still take effect;
-    returns (and stores in :data:`status`) what was done."""
+    returns (and stores in `status`) what was done."""
     global status
     flags = environ.get("XLA_FLAGS", "")
     machine = platform.machine() if machine is None else machine

@@ -1,9 +1,9 @@
 """Shooting on the Poincare map: the one-revolution map and its Jacobian by forward
 mode, Newton's method on the dynamic subspace, the tangent-growth revolution and the
 batch means of long-run statistics. The building blocks of
-:func:`jaxcrank.numerics.steady.steady_state` (see its module for the method).
+[`jaxcrank.numerics.steady.steady_state`][] (see its module for the method).
 
-States here are the scaled states of :func:`jaxcrank.physics.model.state_scales`;
+States here are the scaled states of [`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales];
 ``z`` is a state without its two work entries (they never feed back), the works
 restart at zero every map.
 """
@@ -31,7 +31,8 @@ STEADY_DEFAULTS = SolveOptions(rtol=1e-10, atol=1e-10, max_steps=2_000_000)
 
 
 class RESULTS(eqxi.Enumeration):
-    """Outcome of :func:`steady_state` (``SteadyState.result``); the message says what to change."""
+    """Outcome of [`steady_state`][jaxcrank.numerics.steady.steady_state] (``SteadyState.result``); the message says
+    what to change."""
 
     successful = ""
     settle_max_steps = (
@@ -100,7 +101,7 @@ def period_solve(
     adjoint=None,
 ) -> Simulation:
     """k revolutions from the scaled state ``y0`` at t = 0 with the headline metrics
-    tracked over t in (0, k T] (:mod:`jaxcrank.numerics.tracking`) and the state stored
+    tracked over t in (0, k T] ([`jaxcrank.numerics.tracking`][]) and the state stored
     at ``samples_per_revolution`` equal crank-angle steps per revolution (default 0.1
     deg, as ``jaxcrank simulate``). ``throw=False``: inspect ``.ok``. Forward mode
     (``adjoint`` defaults to ``diffrax.ForwardMode()``)."""

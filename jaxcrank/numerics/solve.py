@@ -1,8 +1,8 @@
 """Solving the equations of motion with diffrax.
 
-Every numerical choice is an argument of :func:`simulate` with a default; none
+Every numerical choice is an argument of [`simulate`][jaxcrank.numerics.solve.simulate] with a default; none
 lives in the physics parameters. Tolerances act on the dimensionless state of
-:func:`jaxcrank.physics.model.state_scales` (lengths in clearances, velocities in
+[`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales] (lengths in clearances, velocities in
 clearance x crank speed), so ``rtol = atol = 1e-6`` asks for a local error of about
 1e-6 of the clearance per step; impacts amplify it (the docs' benchmarks page gives
 the measured global error).
@@ -44,10 +44,10 @@ SOLVERS = {
 
 
 def solver_from_name(name: str) -> diffrax.AbstractAdaptiveSolver:
-    """The diffrax solver named ``name`` (a key of :data:`SOLVERS`): where text comes
+    """The diffrax solver named ``name`` (a key of `SOLVERS`): where text comes
     in (TOML files, the CLI). The implicit Runge-Kutta ones (Kvaerno) use diffrax's
     chord Newton method at the step-size controller's tolerances, with
-    :class:`jaxcrank.numerics.linalg.DenseInverse` for its linear solves instead of
+    [`jaxcrank.numerics.linalg.DenseInverse`][] for its linear solves instead of
     lineax's LU, a LAPACK call that keeps XLA from compiling the solver loop into one
     kernel.
 
@@ -64,7 +64,7 @@ def solver_from_name(name: str) -> diffrax.AbstractAdaptiveSolver:
 
 
 def solver_name(solver: diffrax.AbstractSolver) -> str:
-    """The :data:`SOLVERS` name of a solver instance (for text out: summaries, TOML),
+    """The `SOLVERS` name of a solver instance (for text out: summaries, TOML),
     or its class name for a solver that has none."""
     for name, cls in SOLVERS.items():
         if type(solver) is cls:
@@ -73,20 +73,22 @@ def solver_name(solver: diffrax.AbstractSolver) -> str:
 
 
 def make_solver(name: str = "tsit5") -> diffrax.AbstractAdaptiveSolver:
-    """Same as :func:`solver_from_name` (kept for scripts that use this name)."""
+    """Same as [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (kept for scripts that use this name)."""
     return solver_from_name(name)
 
 
 @dataclasses.dataclass(frozen=True)
 class SolveOptions:
     """The numerical settings of a solve: the one place their defaults live
-    (:func:`simulate`, sweeps, design objectives and the CLI all start from these).
+    ([`simulate`][jaxcrank.numerics.solve.simulate], sweeps, design objectives and the CLI all start from these).
 
     Attributes:
         solver: a diffrax adaptive solver instance (default ``diffrax.Tsit5()``);
-            text names (TOML, CLI) go through :func:`solver_from_name`.
-        rtol, atol: error tolerances on the dimensionless state
-            (:func:`jaxcrank.physics.model.state_scales`), > 0.
+            text names (TOML, CLI) go through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name].
+        rtol: error tolerances on the dimensionless state
+            ([`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales]), > 0 (the same for atol).
+        atol: error tolerances on the dimensionless state
+            ([`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales]), > 0 (the same for rtol).
         dt0: initial step, s, > 0.
         max_steps: step budget (accepted and rejected steps), >= 1.
 
@@ -123,12 +125,12 @@ class SolveOptions:
     @classmethod
     def from_text(cls, solver: str | None = None, **changes) -> SolveOptions:
         """The defaults with ``changes``, the solver given by name (TOML files, the
-        CLI; :func:`solver_from_name`). ``None`` values are ignored."""
+        CLI; [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name]). ``None`` values are ignored."""
         return DEFAULTS.replace(solver=None if solver is None else solver_from_name(solver), **changes)
 
     @property
     def solver_name(self) -> str:
-        """The solver's name (:func:`solver_name`), for text out."""
+        """The solver's name ([`solver_name`][jaxcrank.numerics.solve.SolveOptions.solver_name]), for text out."""
         return solver_name(self.solver)
 
     def replace(self, **changes) -> SolveOptions:
@@ -145,17 +147,17 @@ class SimulationError(RuntimeError):
 
 
 class Simulation(eqx.Module):
-    """The result of :func:`simulate`.
+    """The result of [`simulate`][jaxcrank.numerics.solve.simulate].
 
     Attributes:
         mechanism: the parameters that were simulated.
         ts: sample times, s, shape (n,) (the end time alone, shape (1,), when the
-            samples were not saved; the ``save_ts`` of :func:`simulate` when given).
+            samples were not saved; the ``save_ts`` of [`simulate`][jaxcrank.numerics.solve.simulate] when given).
         ys: scaled state at those times, shape (n, state size).
         result: diffrax result code (``diffrax.RESULTS``).
         num_steps: accepted steps. num_rejected: rejected steps.
         metrics: the headline metrics tracked during the solve
-            (:func:`jaxcrank.numerics.tracking.finish`: name -> value, units in the name), or
+            ([`jaxcrank.numerics.tracking.finish`][]: name -> value, units in the name), or
             ``None`` when the solve did not track them (``metrics_start=None``).
     """
 
@@ -173,7 +175,7 @@ class Simulation(eqx.Module):
 
 
 def step_size_controller(solver, rtol, atol):
-    """The adaptive step-size controller :func:`simulate` uses with ``solver``: PI
+    """The adaptive step-size controller [`simulate`][jaxcrank.numerics.solve.simulate] uses with ``solver``: PI
     control for implicit solvers, I control for explicit ones; RMS norm of the scaled
     error; ``rtol``, ``atol`` on the dimensionless state."""
     implicit = isinstance(solver, diffrax.AbstractImplicitSolver)
@@ -185,7 +187,7 @@ def step_size_controller(solver, rtol, atol):
 def _with_tolerances(solver, controller):
     """An implicit solver's root finder with the controller's tolerances and norm
     filled in where it takes them from the controller (what ``diffeqsolve`` does for
-    an implicit solver it sees; a :class:`~jaxcrank.numerics.tracking.MetricsTracking`
+    an implicit solver it sees; a [`MetricsTracking`][jaxcrank.numerics.tracking.MetricsTracking]
     wrapper hides the solver from that check)."""
     if not isinstance(solver, diffrax.AbstractImplicitSolver):
         return solver
@@ -292,19 +294,37 @@ def simulate(
         ts: sample times, s, increasing, starting at the initial time. Without it,
             ``n_samples`` equally spaced times from 0 to ``t1``.
         n_samples: number of equally spaced samples (default one per 0.1 deg of crank).
-        y0: scaled state at ``ts[0]`` (default :func:`jaxcrank.physics.model.initial_state`,
+        y0: scaled state at ``ts[0]`` (default
+            [`jaxcrank.physics.model.initial_state`][jaxcrank.physics.state.initial_state] ,
             pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.
-        options: the numerical settings (:class:`SolveOptions`).
-        solver, rtol, atol, dt0, max_steps: override the field of ``options`` of the
+        options: the numerical settings ([`SolveOptions`][jaxcrank.numerics.solve.SolveOptions]).
+        solver: override the field of ``options`` of the
             same name when given. ``solver`` is a diffrax solver instance; a name
-            (:data:`SOLVERS`) is still taken, through :func:`solver_from_name`.
+            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
+            for rtol, atol, dt0, max_steps).
+        rtol: override the field of ``options`` of the
+            same name when given. ``solver`` is a diffrax solver instance; a name
+            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
+            for solver, atol, dt0, max_steps).
+        atol: override the field of ``options`` of the
+            same name when given. ``solver`` is a diffrax solver instance; a name
+            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
+            for solver, rtol, dt0, max_steps).
+        dt0: override the field of ``options`` of the
+            same name when given. ``solver`` is a diffrax solver instance; a name
+            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
+            for solver, rtol, atol, max_steps).
+        max_steps: override the field of ``options`` of the
+            same name when given. ``solver`` is a diffrax solver instance; a name
+            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
+            for solver, rtol, atol, dt0).
         adjoint: diffrax adjoint (default ``RecursiveCheckpointAdjoint``, exact
             reverse-mode gradients of the discrete solve). For ``jax.jacfwd`` /
             ``jax.jvp`` pass ``diffrax.ForwardMode()``: with a few parameters it is
             the cheaper gradient.
         progress: show a tqdm progress bar (host callback; CLI runs).
         metrics_start: when given (s), the solve tracks the headline metrics over
-            ``t > metrics_start`` (:mod:`jaxcrank.numerics.tracking`: peaks at every accepted
+            ``t > metrics_start`` ([`jaxcrank.numerics.tracking`][]: peaks at every accepted
             step, RMS over the sample times, which must then be equally spaced) into
             ``Simulation.metrics``. Forward mode only (no reverse-mode gradient
             through the tracking).
@@ -314,7 +334,7 @@ def simulate(
         save_ts: store the state at these times only, s (increasing, within the
             solve's span), instead of at every sample time: e.g. a few restart points
             of a solve whose metrics are tracked over all of ``ts``.
-        throw: raise :class:`SimulationError` when the solve fails or produces
+        throw: raise [`SimulationError`][jaxcrank.numerics.solve.SimulationError] when the solve fails or produces
             non-finite values. With ``throw=False`` inspect ``Simulation.ok``
             (batch sweeps).
 
@@ -369,7 +389,8 @@ def _progress(sim: Simulation, t1) -> str:
 
 
 def check(sim: Simulation, max_steps=None, t1=None) -> Simulation:
-    """Raise :class:`SimulationError` with advice if ``sim`` failed or is not finite.
+    """Raise [`SimulationError`][jaxcrank.numerics.solve.SimulationError] with advice if ``sim`` failed or is not
+    finite.
 
     Args:
         sim: a solve made with ``throw=False``.

@@ -4,7 +4,8 @@ The equations of motion are periodic in time with the crank period T = 2 pi / om
 (the crank turns at constant speed), so the state sampled once per revolution, at
 t = n T (the crank back at its initial angle), is a **Poincare section**, and one
 revolution is a map ``Phi: y(nT) -> y((n + 1) T)`` of the scaled state
-(:func:`jaxcrank.physics.model.state_scales`). :func:`steady_state`
+([`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales]).
+[`steady_state`][jaxcrank.numerics.steady.steady_state]
 
 1. **settles**: simulates ``settle_revolutions`` revolutions from pins-centred rest
    (or from ``warm_start``) and keeps the section points;
@@ -34,17 +35,18 @@ Floquet problem, so that ``I - M`` is invertible on what is left:
   again) is an ordinary dynamic entry and is solved for.
 
 The Newton and Floquet problem lives on the **dynamic subspace**: the coordinates s
-and rates s' of :class:`jaxcrank.physics.model.State`, plus the memories that are not
+and rates s' of [`jaxcrank.physics.model.State`][jaxcrank.physics.state.State], plus the memories that are not
 idle (``SteadyState.active``).
 
-**Exact gradient.** :func:`orbit_start` returns the section state y*(mech) with a
+**Exact gradient.** [`orbit_start`][jaxcrank.numerics.steady.orbit_start] returns the section state y*(mech) with a
 ``jax.custom_jvp`` (implicit function theorem at the fixed point):
 ``dy*/dp = (I - M)^-1 dPhi^k/dp`` on the dynamic subspace (idle memories and works
 held), so ``jax.jvp`` / ``jax.jacfwd`` of any function of the steady state are exact.
 Forward mode only (the tangent of Phi goes through ``diffrax.ForwardMode``): design
-problems have few variables. :func:`steady_value_and_grad` wraps it for a functional
+problems have few variables. [`steady_value_and_grad`][jaxcrank.numerics.steady.steady_value_and_grad] wraps it for a
+functional
 of one period of the orbit. The building blocks (maps, Newton, batch means) live in
-:mod:`jaxcrank.numerics.shooting`.
+[`jaxcrank.numerics.shooting`][].
 
 Example::
 
@@ -76,16 +78,16 @@ from .solve import Simulation, SolveOptions, simulate
 
 
 class SteadyStateError(RuntimeError):
-    """:func:`steady_state` could not finish; the message says what to change."""
+    """[`steady_state`][jaxcrank.numerics.steady.steady_state] could not finish; the message says what to change."""
 
 
 class SteadyState(eqx.Module):
-    """The result of :func:`steady_state`. Scaled states as in
-    :func:`jaxcrank.physics.model.state_scales` (lengths in clearances).
+    """The result of [`steady_state`][jaxcrank.numerics.steady.steady_state]. Scaled states as in
+    [`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales] (lengths in clearances).
 
     Attributes:
         mechanism: the mechanism.
-        result: :class:`RESULTS` item (``RESULTS.successful`` unless the solver failed).
+        result: [`RESULTS`][jaxcrank.numerics.shooting.RESULTS] item (``RESULTS.successful`` unless the solver failed).
         regime: ``"periodic"`` or ``"not periodic"``.
         period_revolutions: k, the period in crank revolutions (0 when not periodic).
         residual: ``max |Phi^k(y*) - y*|`` over the dynamic subspace, scaled units (the
@@ -112,7 +114,8 @@ class SteadyState(eqx.Module):
             the statistics revolutions (units in the names); ``None`` when periodic.
         revolutions: solve counts in revolutions: ``settle``, ``shooting`` (with
             tangents), ``orbit``, ``statistics`` (with a tangent).
-        options, samples_per_revolution: the solve settings and sampling used.
+        options: the solve settings and sampling used (the same for samples_per_revolution).
+        samples_per_revolution: the solve settings and sampling used (the same for options).
     """
 
     mechanism: Mechanism
@@ -167,8 +170,9 @@ def carry_state(old: Mechanism, y: Float[Array, " state"], new: Mechanism) -> Fl
 
 
 def _warm_state(mech, warm):
-    """A scaled section state for ``mech`` from a previous :class:`SteadyState` (its
-    pin-in-bearing state carried over by :func:`carry_state`) or a scaled state array."""
+    """A scaled section state for ``mech`` from a previous [`SteadyState`][jaxcrank.numerics.steady.SteadyState] (its
+    pin-in-bearing state carried over by [`carry_state`][jaxcrank.numerics.steady.carry_state] ) or a scaled state
+    array."""
     if isinstance(warm, SteadyState):
         old, y = warm.mechanism, warm.section_state
         if model.clearance_joints(old) == model.clearance_joints(mech) == ("B", "C"):
@@ -240,7 +244,8 @@ def steady_state(
         newton_tol: Newton shooting stops at ``max |Phi^k(y) - y| <= newton_tol``,
             scaled units. Keep it above the map's noise, about 100 x ``options.rtol``.
         max_newton: Newton iterations at most (0: only check the settle's end).
-        warm_start: a previous :class:`SteadyState` (its pin-in-bearing state is carried
+        warm_start: a previous [`SteadyState`][jaxcrank.numerics.steady.SteadyState] (its pin-in-bearing state is
+            carried
             over to ``mech`` physically; a periodic one also gives the period to shoot,
             after one period of settle) or a scaled state at t = 0. When shooting from it
             fails, the solver settles ``settle_revolutions`` from there and starts over.
@@ -249,12 +254,12 @@ def steady_state(
         batch_revolutions: revolutions per batch of the batch means.
         samples_per_revolution: sample times per revolution of the orbit and of the RMS
             metrics (default 3600: 0.1 deg of crank angle).
-        options: solve settings (:data:`STEADY_DEFAULTS`: rtol = atol = 1e-10).
-        throw: raise :class:`SteadyStateError` when the result is not
+        options: solve settings (`STEADY_DEFAULTS`: rtol = atol = 1e-10).
+        throw: raise [`SteadyStateError`][jaxcrank.numerics.steady.SteadyStateError] when the result is not
             ``RESULTS.successful``; with ``False`` inspect ``SteadyState.result``.
 
     Returns:
-        a :class:`SteadyState`.
+        a [`SteadyState`][jaxcrank.numerics.steady.SteadyState].
 
     Raises:
         ParameterError: for an argument outside its range (the message names it).
@@ -389,7 +394,7 @@ def orbit_start(mech: Mechanism, steady: SteadyState) -> Float[Array, " state"]:
 
     Args:
         mech: the mechanism of ``steady`` (possibly built from traced design variables).
-        steady: a periodic :class:`SteadyState` of that mechanism.
+        steady: a periodic [`SteadyState`][jaxcrank.numerics.steady.SteadyState] of that mechanism.
 
     Raises:
         SteadyStateError: when ``steady`` is not periodic (no orbit to differentiate).
@@ -416,12 +421,13 @@ def steady_value_and_grad(objective, build, params, steady: SteadyState):
     """Value and exact gradient of a functional of one period of the periodic orbit.
 
     Args:
-        objective: ``Simulation -> scalar``; it gets :func:`period_solve` of one period
-            from :func:`orbit_start` (``.ts``, ``.ys``, tracked ``.metrics``, e.g.
+        objective: ``Simulation -> scalar``; it gets [`period_solve`][jaxcrank.numerics.shooting.period_solve] of one
+            period
+            from [`orbit_start`][jaxcrank.numerics.steady.orbit_start] (``.ts``, ``.ys``, tracked ``.metrics``, e.g.
             ``lambda sim: sim.metrics["rms_transmission_angle_error_deg"]``).
         build: ``params -> Mechanism``, traceable (e.g. a design problem's ``mechanism``).
         params: the design variables (an array or pytree of arrays).
-        steady: the periodic :class:`SteadyState` of ``build(params)``.
+        steady: the periodic [`SteadyState`][jaxcrank.numerics.steady.SteadyState] of ``build(params)``.
 
     Returns:
         ``(value, gradient)``, the gradient with the structure of ``params``

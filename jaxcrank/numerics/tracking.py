@@ -1,13 +1,13 @@
 """Headline metrics accumulated during a solve, with memory that does not grow
 with the number of samples or steps.
 
-:class:`MetricsTracking` wraps a diffrax solver. After each step it
+[`MetricsTracking`][jaxcrank.numerics.tracking.MetricsTracking] wraps a diffrax solver. After each step it
 
-- evaluates the signals of :data:`jaxcrank.analysis.metrics.PEAK_METRICS` at the step's end
+- evaluates the signals of `jaxcrank.analysis.metrics.PEAK_METRICS` at the step's end
   and keeps their running maxima: the peaks over the solution, independent of the
   output sample times (a step a few microseconds long resolves an impact, an
   output sample every 0.1 deg of crank angle does not);
-- evaluates the signals of :data:`jaxcrank.analysis.metrics.RMS_METRICS` at the sample times
+- evaluates the signals of `jaxcrank.analysis.metrics.RMS_METRICS` at the sample times
   that fall in the step, from the step's dense output (the values ``SaveAt(ts=...)``
   would store), and adds their squares: the RMS over the samples, the numbers of the
   RMS of stored samples (to rounding). The sample times are equally spaced and
@@ -17,7 +17,7 @@ diffrax keeps a solver's state only for accepted steps, so rejected steps leave
 no trace. The window of every metric is ``t > t_start``; the peaks of the contact
 forces are also kept over the whole run. Forward mode only: the sample loop is a
 ``while_loop``, which reverse-mode autodiff does not go through (gradients of RMS
-metrics use stored samples of short windows, :mod:`optim.objective`).
+metrics use stored samples of short windows, [`optim.objective`][]).
 """
 
 from __future__ import annotations
@@ -36,9 +36,9 @@ from ..physics import model
 
 class Running(NamedTuple):
     """The accumulators (a solver-state entry): peaks over step ends in the window
-    and over the whole run (in the order of :data:`jaxcrank.analysis.metrics.PEAK_METRICS`),
+    and over the whole run (in the order of `jaxcrank.analysis.metrics.PEAK_METRICS`),
     sums of squares over the window's samples and their count (order of
-    :data:`jaxcrank.analysis.metrics.RMS_METRICS`), and the index of the next sample time."""
+    `jaxcrank.analysis.metrics.RMS_METRICS`), and the index of the next sample time."""
 
     peaks: Float[Array, " peaks"]
     whole_run_peaks: Float[Array, " peaks"]
@@ -62,14 +62,16 @@ def _peak_values(frame: model.Frame):
 
 class MetricsTracking(diffrax.AbstractAdaptiveSolver):
     """A diffrax solver that steps like ``solver`` and accumulates the headline
-    metrics (:class:`Running`) in its state. ``args`` of the solve must be the
-    :class:`jaxcrank.Mechanism`.
+    metrics ([`Running`][jaxcrank.numerics.tracking.Running]) in its state. ``args`` of the solve must be the
+    [`jaxcrank.Mechanism`][jaxcrank.physics.params.Mechanism].
 
     Attributes:
         solver: the solver that takes the steps (its steps, error estimates and dense
             output are passed through unchanged).
-        first_sample, last_sample: the first and last of the equally spaced sample
-            times of the RMS metrics, s.
+        first_sample: the first and last of the equally spaced sample
+            times of the RMS metrics, s (the same for last_sample).
+        last_sample: the first and last of the equally spaced sample
+            times of the RMS metrics, s (the same for first_sample).
         n_samples: number of sample times, >= 2 (static).
         t_start: the metrics cover t > t_start, s.
     """
@@ -143,7 +145,7 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
 
 
 def finish(running: Running) -> dict[str, Array]:
-    """The metrics of :data:`jaxcrank.analysis.metrics.METRICS` (plus
+    """The metrics of `jaxcrank.analysis.metrics.METRICS` (plus
     ``peak_contact_force_{B,C}_whole_run_N``) from the accumulators of a finished
     solve; units as in the names. A window without samples gives an RMS of 0."""
     out = metrics.by_name(metrics.PEAK_METRICS, running.peaks)

@@ -1,3 +1,3 @@
 """The physics: mechanism parameters, contact and friction laws, the closed-form ideal
 mechanism and the equations of motion with clearance joints. Imports nothing else of
-jaxcrank but :mod:`jaxcrank.errors`."""
+jaxcrank but [`jaxcrank.errors`][]."""

@@ -1,9 +1,9 @@
 """Contact in one clearance joint: penetration, normal and friction forces, and the
 rate of the joint's approach-speed memory (model.md, paper Eq. 1-13).
 
-The laws themselves live in :mod:`jaxcrank.physics.laws` and
-:mod:`jaxcrank.physics.memory`; :func:`joint_contact` composes them for one joint
-from where its pin and hole are (:class:`~jaxcrank.physics.joints.JointMotion`).
+The laws themselves live in [`jaxcrank.physics.laws`][] and
+[`jaxcrank.physics.memory`][]; [`joint_contact`][jaxcrank.physics.contact.joint_contact] composes them for one joint
+from where its pin and hole are ([`JointMotion`][jaxcrank.physics.joints.JointMotion]).
 """
 
 from __future__ import annotations
@@ -51,12 +51,13 @@ def joint_contact(
     Args:
         mech: the contact and friction laws and their parameters.
         joint: the joint's radii, m.
-        pin_material, hole_material: for the effective compliance.
+        pin_material: for the effective compliance (the same for hole_material).
+        hole_material: for the effective compliance (the same for pin_material).
         motion: pin and hole centres (m), velocities (m/s) and angular velocities (rad/s).
         memory: the joint's approach-speed memory state, m/s.
 
     Returns:
-        The joint's :class:`JointContact`.
+        The joint's [`JointContact`][jaxcrank.physics.contact.JointContact].
     """
     d = motion.pin_position - motion.hole_position
     eps = laws.safe_norm(d)
@@ -105,7 +106,7 @@ def approach_memory_rate(
     clearance: Float[ArrayLike, ""],
 ) -> Float[Array, ""]:
     """d(approach-speed memory)/dt of a joint, m/s^2: the relaxation part of its
-    ``contact`` plus the :func:`~jaxcrank.physics.memory.memory_tracking` weight
+    ``contact`` plus the [`memory_tracking`][jaxcrank.physics.memory.memory_tracking] weight
     times the time derivative of the memory target, for the pin's velocity (m/s) and
     acceleration (m/s^2) relative to the hole and the radial ``clearance`` (m).
 

@@ -1,9 +1,9 @@
 """Equations of motion with clearance joints (model.md, Eq. 14).
 
 Lagrange's ``J^T M J s'' = J^T (F - M gamma)`` with ``J = dQ/ds`` and
-``gamma = dJ/dt s'`` from :func:`~jaxcrank.physics.kinematics.coordinates`, so
+``gamma = dJ/dt s'`` from [`coordinates`][jaxcrank.physics.kinematics.coordinates], so
 ideal-joint reactions drop out and are recovered afterwards by
-:func:`jaxcrank.physics.ideal.reactions`. Every clearance joint goes through the same
+[`jaxcrank.physics.ideal.reactions`][]. Every clearance joint goes through the same
 code: its contact force loads the rod end (and, at the slider pin, the slider).
 """
 
@@ -41,7 +41,7 @@ class Dynamics(NamedTuple):
 
 def dynamics(mech: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Dynamics:
     """The equations of motion at time t (s) for scaled state y: only what dy/dt
-    needs (:func:`jaxcrank.physics.frame.evaluate` adds the output-only quantities)."""
+    needs ([`jaxcrank.physics.frame.evaluate`][] adds the output-only quantities)."""
     n = n_dof(mech)
     sites = clearance_sites(mech)
     k = len(sites)

@@ -1,7 +1,7 @@
 """The output frame: every physical quantity of the mechanism at one instant.
 
-:func:`evaluate` is a function of (t, y) alone, so every output is a function of the
-solution; it adds to :func:`~jaxcrank.physics.dynamics.dynamics` what only the
+[`evaluate`][jaxcrank.physics.frame.evaluate] is a function of (t, y) alone, so every output is a function of the
+solution; it adds to [`dynamics`][jaxcrank.physics.dynamics.dynamics] what only the
 outputs need (ideal motion, energies, per-joint quantities for ideal joints).
 """
 

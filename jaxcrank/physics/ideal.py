@@ -6,7 +6,7 @@ y = e. Positions are closed form; velocities and accelerations are their exact
 time derivatives (forward-mode autodiff of the closed form, no finite
 differences). Inverse dynamics gives the joint reactions and the driving moment.
 
-All functions take a :class:`~jaxcrank.physics.params.Mechanism` and a scalar time t (s);
+All functions take a [`Mechanism`][jaxcrank.physics.params.Mechanism] and a scalar time t (s);
 ``jax.vmap`` over t for trajectories.
 """
 
@@ -35,7 +35,7 @@ def positions(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, " 4"]:
     """Ideal generalized positions Q = (x2 [m], y2 [m], theta2 [rad], x3 [m]).
 
     ``sin theta2 = (e - L1 sin theta1) / L2``, ``x3 = L1 cos theta1 + L2 cos theta2``.
-    Requires L2 > L1 + |e| (checked by :class:`Mechanism`).
+    Requires L2 > L1 + |e| (checked by [`Mechanism`][jaxcrank.physics.params.Mechanism]).
     """
     th1 = crank_angle(mech, t)
     l1, l2, e = mech.crank_length, mech.rod_length, mech.offset

@@ -2,9 +2,9 @@
 pin C (model.md, "Coordinates").
 
 Each joint is a pin on one body (the crank at B, the slider at C) in a hole at one
-end of the rod. An :class:`AbstractJointSite` says which parameters belong to the
+end of the rod. An [`AbstractJointSite`][jaxcrank.physics.joints.AbstractJointSite] says which parameters belong to the
 joint and how its pin and hole move; everything else (state layout, contact,
-dynamics, outputs) loops over :data:`JOINTS` or :func:`clearance_sites` with one code
+dynamics, outputs) loops over `JOINTS` or [`clearance_sites`][jaxcrank.physics.joints.clearance_sites] with one code
 path, whatever the joint.
 """
 
@@ -47,8 +47,8 @@ class JointMotion(NamedTuple):
 class AbstractJointSite(eqx.Module):
     """One joint of the mechanism: a pin on the crank or slider in a hole at one rod end.
 
-    Subclasses say which :class:`~jaxcrank.physics.params.Joint` and pin material of
-    the :class:`~jaxcrank.physics.params.Mechanism` are theirs, how the pin moves, at
+    Subclasses say which [`Joint`][jaxcrank.physics.params.Joint] and pin material of
+    the [`Mechanism`][jaxcrank.physics.params.Mechanism] are theirs, how the pin moves, at
     which rod end the hole sits, and what the contact force on the pin does to the
     slider coordinate x3.
     """
@@ -79,19 +79,20 @@ class AbstractJointSite(eqx.Module):
     @abc.abstractmethod
     def from_centre(self, centre, half):
         """The rod end of this joint from the rod's centre (or its rate) and
-        :func:`rod_half` (or its rate)."""
+        [`rod_half`][jaxcrank.physics.joints.rod_half] (or its rate)."""
 
     @abc.abstractmethod
     def to_centre(self, end, half):
-        """The rod's centre from this joint's rod end and :func:`rod_half` (inverse of
-        :meth:`from_centre`)."""
+        """The rod's centre from this joint's rod end and [`rod_half`][jaxcrank.physics.joints.rod_half] (inverse of
+        [`from_centre`][jaxcrank.physics.joints.AbstractJointSite.from_centre])."""
 
     @abc.abstractmethod
     def slider_load(self, force_on_pin: Float[ArrayLike, " 2"]) -> Array | float:
         """Generalized force on x3 of the contact force on the pin, N."""
 
     def motion(self, mech: Mechanism, q, qd, t) -> JointMotion:
-        """The joint's :class:`JointMotion` for full coordinates Q = (x2, y2, theta2, x3)
+        """The joint's [`JointMotion`][jaxcrank.physics.joints.JointMotion] for full coordinates Q = (x2, y2, theta2,
+        x3)
         and their rates at time t (s)."""
         half = rod_half(mech, q)
         half_dot = qd[2] * perp(half)
@@ -102,7 +103,7 @@ class AbstractJointSite(eqx.Module):
 
     def accelerations(self, mech: Mechanism, q, qd, qdd, t) -> tuple[Array, Array]:
         """(pin acceleration, hole acceleration), m/s^2: the time derivatives of the
-        velocities in :meth:`motion`."""
+        velocities in [`motion`][jaxcrank.physics.joints.AbstractJointSite.motion]."""
         half = rod_half(mech, q)
         half_ddot = qdd[2] * perp(half) - qd[2] ** 2 * half
         return self.pin_acceleration(mech, q, qd, qdd, t), self.from_centre(qdd[:2], half_ddot)

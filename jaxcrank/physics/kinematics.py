@@ -53,7 +53,7 @@ def joint_eccentricities(
     mech: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]
 ) -> tuple[Float[Array, "joints 2"], Float[Array, "joints 2"]]:
     """Eccentricities d = pin centre - hole centre, m, and their rates, m/s, of every
-    joint with clearance (:func:`~jaxcrank.physics.joints.clearance_joints` order),
+    joint with clearance ([`clearance_joints`][jaxcrank.physics.joints.clearance_joints] order),
     shape (joints, 2) each."""
     state = unpack(mech, y)
     q, qd, _ = coordinates(mech, state.deviation, state.deviation_rate, t)
@@ -90,7 +90,7 @@ def state_from_eccentricities(
     d_rate: Float[ArrayLike, "2 2"],
     rest: Float[ArrayLike, " aux"],
 ) -> Float[Array, " state"]:
-    """Inverse of :func:`eccentricities`: the scaled state whose pins sit at
+    """Inverse of [`eccentricities`][jaxcrank.physics.kinematics.eccentricities]: the scaled state whose pins sit at
     eccentricities ``d`` (2, 2) m moving at ``d_rate`` (2, 2) m/s in bearings B and
     C at time t; ``rest`` are the remaining state entries in SI units (approach-speed
     memories, m/s; driver and dissipated work, J), scaled here for ``mech``.

@@ -6,9 +6,10 @@ Every normal law here has the form (model.md, "Normal contact force")
     F_n = K(delta) delta^n (1 + chi delta_dot / delta_dot_minus)   for delta > 0, else 0,
 
 and differs only in its stiffness K(delta) and hysteresis factor chi(c_e)
-(:class:`AbstractContactLaw`). Friction is the modified Coulomb law with a choice of
-ramp (:class:`AbstractFrictionLaw`). Names (:data:`CONTACT_LAWS`,
-:data:`FRICTION_LAWS`) are used only where text comes in: TOML files and the CLI.
+([`AbstractContactLaw`][jaxcrank.physics.laws.AbstractContactLaw]). Friction is the modified Coulomb law with a choice
+of
+ramp ([`AbstractFrictionLaw`][jaxcrank.physics.laws.AbstractFrictionLaw]). Names (`CONTACT_LAWS`,
+`FRICTION_LAWS`) are used only where text comes in: TOML files and the CLI.
 Powers, square roots and kinks are wrapped in double ``where`` so values and
 gradients stay finite everywhere, including delta <= 0 and zero slip.
 """
@@ -105,7 +106,8 @@ class AbstractContactLaw(eqx.Module):
 
     @abc.abstractmethod
     def elastic_energy(self, penetration, *, hole_radius, pin_radius, compliance_sum, exponent=1.5):
-        """Energy stored in the contact, the integral of :meth:`elastic_force` over [0, delta], J."""
+        """Energy stored in the contact, the integral of
+        [`elastic_force`][jaxcrank.physics.laws.AbstractContactLaw.elastic_force] over [0, delta], J."""
 
     def normal_force(
         self,
@@ -129,7 +131,10 @@ class AbstractContactLaw(eqx.Module):
             approach_speed: delta_dot_minus, the normal speed at the onset of the
                 impact, m/s, > 0.
             restitution: c_e in (0, 1].
-            hole_radius, pin_radius: m. compliance_sum: 1/Pa. exponent: n.
+            hole_radius: m (the same for pin_radius).
+            pin_radius: m (the same for hole_radius).
+            compliance_sum: 1/Pa.
+            exponent: n.
 
         Returns:
             ``(F_n, F_elastic)``; F_n is clipped at zero (contacts push, never pull).
@@ -147,7 +152,7 @@ class AbstractContactLaw(eqx.Module):
 
 
 class AbstractHertzLaw(AbstractContactLaw):
-    """A law with the constant Hertz stiffness K of :func:`hertz_stiffness`:
+    """A law with the constant Hertz stiffness K of [`hertz_stiffness`][jaxcrank.physics.laws.hertz_stiffness]:
     ``K delta^n`` with stored energy ``K delta^(n+1) / (n+1)``."""
 
     def elastic_force(self, penetration, *, hole_radius, pin_radius, compliance_sum, exponent=1.5):
@@ -212,7 +217,7 @@ class Gonthier(AbstractHertzLaw):
 
 class Hybrid(AbstractContactLaw):
     """The paper's hybrid law (Eq. 6-8, after Bai & Zhao 2012): the stiffness of
-    :func:`hybrid_elastic_force` with the Eq. 5 damping,
+    [`hybrid_elastic_force`][jaxcrank.physics.laws.hybrid_elastic_force] with the Eq. 5 damping,
     chi = 3 (1 - c_e^2) exp(2 (1 - c_e)) / 4. Only for the Hertz exponent n = 1.5
     (the ``exponent`` argument is ignored)."""
 
@@ -279,7 +284,7 @@ class Ambrosio(AbstractFrictionLaw):
 
 
 class SmoothRamp(AbstractFrictionLaw):
-    """The same ramp as a C2 quintic :func:`smoothstep` (for differentiable solves)."""
+    """The same ramp as a C2 quintic [`smoothstep`][jaxcrank.physics.laws.smoothstep] (for differentiable solves)."""
 
     name: ClassVar[str] = "smooth"
 

@@ -2,12 +2,13 @@
 
 The contact laws divide by ``delta_dot_minus``, the normal speed at the onset of an
 impact. Each clearance joint carries it as a state, the approach-speed memory: while
-the pins are apart it tracks the normal speed exactly (:func:`memory_tracking`
-weights the time derivative of :func:`memory_target`), it freezes in contact, and it
-relaxes onto its target away from the wall (:func:`memory_relaxation`). Like the laws
-in :mod:`jaxcrank.physics.laws` these are small pure functions of physical
-arguments; :func:`jaxcrank.physics.contact.approach_memory_rate` assembles them into
-d(memory)/dt, for the mechanism and for the free pin of :mod:`jaxcrank.analysis.validation.wall_impact`
+the pins are apart it tracks the normal speed exactly ([`memory_tracking`][jaxcrank.physics.memory.memory_tracking]
+weights the time derivative of [`memory_target`][jaxcrank.physics.memory.memory_target]), it freezes in contact, and it
+relaxes onto its target away from the wall ([`memory_relaxation`][jaxcrank.physics.memory.memory_relaxation]). Like the
+laws
+in [`jaxcrank.physics.laws`][] these are small pure functions of physical
+arguments; [`jaxcrank.physics.contact.approach_memory_rate`][] assembles them into
+d(memory)/dt, for the mechanism and for the free pin of [`jaxcrank.analysis.validation.wall_impact`][]
 alike.
 """
 
@@ -50,7 +51,7 @@ def freeze_coordinate(penetration: Float[ArrayLike, ""], target: Float[ArrayLike
 
 def memory_tracking(x: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
     """Weight w of the exact tracking term d(target)/dt in the approach-speed memory's
-    rate, as a function of the :func:`freeze_coordinate` x.
+    rate, as a function of the [`freeze_coordinate`][jaxcrank.physics.memory.freeze_coordinate] x.
 
     Contract: w = 1 for x >= 1, w = 0 for x <= 0 (contact), C2 in between, and
     ``int_0^1 (1 - w) dx = int_0^1 x (1 - w) dx = 0``. Over the last t_f of
@@ -72,14 +73,14 @@ def memory_tracking(x: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
 def memory_relaxation(x: Float[ArrayLike, ""], contact) -> Float[Array, ""]:
     """Rate, 1/s, at which the approach-speed memory relaxes onto its target:
     ``S(x - 1) (1 / memory_time + (1 - S(x t_f / reset_window - 1)) / reset_time)``
-    for the :func:`freeze_coordinate` x (time to or from the wall in units of
+    for the [`freeze_coordinate`][jaxcrank.physics.memory.freeze_coordinate] x (time to or from the wall in units of
     t_f = ``freeze_time``).
 
     Contract:
 
     - zero in contact and within t_f of it (S(x - 1) = 0 for x <= 1; 1 for
       x >= 2), so the relaxation cannot pull the memory off the exact tracking of
-      :func:`memory_tracking` before an onset;
+      [`memory_tracking`][jaxcrank.physics.memory.memory_tracking] before an onset;
     - ``1 / memory_time`` everywhere else;
     - plus ``1 / reset_time`` while the time to or from the wall is below
       ``reset_window`` (fading out by twice it): right after a separation the
@@ -103,7 +104,7 @@ def memory_target_rate(
     relative_acceleration: Float[ArrayLike, " 2"],
     clearance: Float[ArrayLike, ""],
 ) -> Float[Array, ""]:
-    """Time derivative of :func:`memory_target` along the motion, m/s^2.
+    """Time derivative of [`memory_target`][jaxcrank.physics.memory.memory_target] along the motion, m/s^2.
 
     With m = max(|d|, c/2): ``(v.v + d.a) / m - (d.v) m' / m^2``, where
     ``m' = d.v / |d|`` while |d| > c/2 and 0 inside (c is constant in time).

@@ -14,15 +14,15 @@ both ideal                no s: the closed-form mechanism
 
 The parts:
 
-- :mod:`jaxcrank.physics.joints`: the joints B and C as objects (parameters, pin and
+- [`jaxcrank.physics.joints`][]: the joints B and C as objects (parameters, pin and
   hole motion), so the rest loops over them;
-- :mod:`jaxcrank.physics.state`: the state vector and its scales;
-- :mod:`jaxcrank.physics.kinematics`: full coordinates Q = (x2, y2, theta2, x3) from s,
+- [`jaxcrank.physics.state`][]: the state vector and its scales;
+- [`jaxcrank.physics.kinematics`][]: full coordinates Q = (x2, y2, theta2, x3) from s,
   their rates, the eccentricities;
-- :mod:`jaxcrank.physics.memory`: the approach-speed memory law;
-- :mod:`jaxcrank.physics.contact`: contact in one joint;
-- :mod:`jaxcrank.physics.dynamics`: the equations of motion and the vector field;
-- :mod:`jaxcrank.physics.frame`: every physical quantity at one (t, y) (:func:`evaluate`);
+- [`jaxcrank.physics.memory`][]: the approach-speed memory law;
+- [`jaxcrank.physics.contact`][]: contact in one joint;
+- [`jaxcrank.physics.dynamics`][]: the equations of motion and the vector field;
+- [`jaxcrank.physics.frame`][]: every physical quantity at one (t, y) ([`evaluate`][jaxcrank.physics.frame.evaluate]);
   all outputs use it, so outputs are functions of the solution.
 
 This module re-exports their public names.

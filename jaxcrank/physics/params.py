@@ -1,9 +1,9 @@
 """Mechanism parameters as pytrees, their validation, and the paper preset.
 
 Every number a user may sweep or differentiate is a pytree leaf (``jax.grad``,
-``jax.vmap`` and optax act on a :class:`Mechanism` directly). Only choices that
+``jax.vmap`` and optax act on a [`Mechanism`][jaxcrank.physics.params.Mechanism] directly). Only choices that
 change the structure of the model are static: the contact and friction laws
-(leafless equinox Modules, :mod:`jaxcrank.physics.laws`), and whether a joint is
+(leafless equinox Modules, [`jaxcrank.physics.laws`][]), and whether a joint is
 ideal (which changes the number of degrees of freedom).
 
 All values are SI: metres, kilograms, seconds, radians, newtons, pascals.
@@ -40,7 +40,8 @@ def _concrete(value):
 
 
 def _check(name: str, value, *, low=None, high=None, low_open=True, high_open=True, unit=""):
-    """Raise :class:`ParameterError` unless every element of ``value`` is in range."""
+    """Raise [`ParameterError`][jaxcrank.physics.params.ParameterError] unless every element of ``value`` is in
+    range."""
     arr = _concrete(value)
     if arr is None:
         return
@@ -117,9 +118,9 @@ class Contact(eqx.Module):
     """Normal contact law settings (model.md, "Normal contact force").
 
     Attributes:
-        law: the normal law, a :class:`jaxcrank.physics.laws.AbstractContactLaw`
+        law: the normal law, a [`jaxcrank.physics.laws.AbstractContactLaw`][]
             (TOML/CLI names in ``laws.CONTACT_LAWS``). The default
-            :class:`~jaxcrank.physics.laws.Hybrid` is the paper's Eq. 6-8 (Bai & Zhao 2012
+            [`Hybrid`][jaxcrank.physics.laws.Hybrid] is the paper's Eq. 6-8 (Bai & Zhao 2012
             stiffness with Eq. 5 damping).
         restitution: coefficient of restitution c_e in (0, 1] that sets the
             hysteresis damping factor chi of the law. The restitution a law
@@ -184,10 +185,10 @@ class Friction(eqx.Module):
     rising to 1 at ``v1``. The ramp width ``v1 - v0`` is the smoothing width.
 
     Attributes:
-        law: the ramp, a :class:`jaxcrank.physics.laws.AbstractFrictionLaw`:
-            :class:`~jaxcrank.physics.laws.SmoothRamp` (``"smooth"``, C2 quintic ramp between
+        law: the ramp, a [`jaxcrank.physics.laws.AbstractFrictionLaw`][]:
+            [`SmoothRamp`][jaxcrank.physics.laws.SmoothRamp] (``"smooth"``, C2 quintic ramp between
             v0 and v1, the default for differentiable solves) or
-            :class:`~jaxcrank.physics.laws.Ambrosio` (``"ambrosio"``, the reference linear
+            [`Ambrosio`][jaxcrank.physics.laws.Ambrosio] (``"ambrosio"``, the reference linear
             ramp, with kinks at v0 and v1).
         coefficient: dynamic friction coefficient mu, dimensionless, >= 0
             (0 disables friction).
@@ -232,15 +233,26 @@ class Mechanism(eqx.Module):
         crank_length: L1, m.
         rod_length: L2, m; must exceed ``crank_length + |offset|``.
         offset: eccentricity e of the slider line y = e, m.
-        crank_mass, rod_mass, slider_mass: m1, m2, m3, kg.
-        crank_inertia, rod_inertia, slider_inertia: J1, J2, J3 about each centre
+        crank_mass: m1, kg.
+        rod_mass: m2, kg.
+        slider_mass: m3, kg.
+        crank_inertia: J1 about each centre
+            of mass, kg m^2 (J1 and J3 do not enter the dynamics at constant
+            crank speed; kept for the record and for extensions).
+        rod_inertia: J2 about each centre
+            of mass, kg m^2 (J1 and J3 do not enter the dynamics at constant
+            crank speed; kept for the record and for extensions).
+        slider_inertia: J3 about each centre
             of mass, kg m^2 (J1 and J3 do not enter the dynamics at constant
             crank speed; kept for the record and for extensions).
         crank_speed: omega, rad/s (600 rpm = 62.83 rad/s), constant.
         initial_crank_angle: theta1 at t = 0, rad.
         gravity: g along -y, m/s^2.
-        joint_B, joint_C: the two clearance joints.
-        crank_material, rod_material, slider_material: contact surface materials.
+        joint_B: the two clearance joints (the same for joint_C).
+        joint_C: the two clearance joints (the same for joint_B).
+        crank_material: contact surface materials (the same for rod_material, slider_material).
+        rod_material: contact surface materials (the same for crank_material, slider_material).
+        slider_material: contact surface materials (the same for crank_material, rod_material).
         contact: normal contact law settings.
         friction: friction law settings.
     """
@@ -358,14 +370,14 @@ def set_parameter(mech: Mechanism, name: str, x) -> Mechanism:
 
 def set_parameters(mech: Mechanism, names, values) -> Mechanism:
     """``mech`` with each parameter in ``names`` set to the matching entry of
-    ``values`` (SI; traceable), as :func:`set_parameter`."""
+    ``values`` (SI; traceable), as [`set_parameter`][jaxcrank.physics.params.set_parameter]."""
     for i, name in enumerate(names):
         mech = set_parameter(mech, name, values[i])
     return mech
 
 
 def get_parameter(mech: Mechanism, name: str) -> float:
-    """Current value (SI) of a design variable name (see :func:`set_parameter`)."""
+    """Current value (SI) of a design variable name (see [`set_parameter`][jaxcrank.physics.params.set_parameter])."""
     return float(parameter_value(mech, name))
 
 
@@ -409,7 +421,7 @@ _UNITS = {
 
 
 def parameter_unit(name: str) -> str:
-    """SI unit of a parameter name (as in :func:`set_parameter`), written for column
+    """SI unit of a parameter name (as in [`set_parameter`][jaxcrank.physics.params.set_parameter]), written for column
     names: ``m``, ``kg``, ``kg_m2``, ``rad_s``, ``m_s``, ``m_s2``, ``Pa``, ``s``, ``rad`` or ``1``
     (dimensionless)."""
     get_parameter(Mechanism(), name)  # raises on unknown names

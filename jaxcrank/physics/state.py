@@ -2,8 +2,8 @@
 
 The solver state is the *deviation from the ideal mechanism* in generalized
 coordinates s; which coordinates exist depends on which joints are ideal
-(:mod:`jaxcrank.physics.model`). The state vector, every entry dimensionless
-(:func:`state_scales`), is
+([`jaxcrank.physics.model`][]). The state vector, every entry dimensionless
+([`state_scales`][jaxcrank.physics.state.state_scales]), is
 ``y = (s, s', approach-speed memory per clearance joint, driver work, dissipated work)``.
 """
 
@@ -30,7 +30,7 @@ def state_size(mech: Mechanism) -> int:
 
 
 class State(NamedTuple):
-    """The entries of a state vector in SI units (:func:`unpack`); each with the
+    """The entries of a state vector in SI units ([`unpack`][jaxcrank.physics.state.unpack]); each with the
     state's leading axes, if any."""
 
     deviation: jax.Array  # s, generalized-coordinate deviations from the ideal mechanism (m, rad)
@@ -41,7 +41,8 @@ class State(NamedTuple):
 
 
 def unpack(mech: Mechanism, y: Float[ArrayLike, "*batch state"]) -> State:
-    """The scaled state ``y`` (shape (..., :func:`state_size`)) as a :class:`State` in SI units."""
+    """The scaled state ``y`` (shape (..., [`state_size`][jaxcrank.physics.state.state_size] )) as a
+    [`State`][jaxcrank.physics.state.State] in SI units."""
     phys = y * state_scales(mech)
     n, k = n_dof(mech), len(clearance_joints(mech))
     return State(phys[..., :n], phys[..., n : 2 * n], phys[..., 2 * n : 2 * n + k], phys[..., -2], phys[..., -1])
@@ -51,7 +52,7 @@ def auxiliary(mech: Mechanism, y: Float[ArrayLike, "*batch state"]) -> Float[Arr
     """The state entries after the coordinates and their rates (approach-speed
     memories, m/s, then driver and dissipated work, J), in SI units, shape
     (..., state_size - 2 n_dof): what
-    :func:`~jaxcrank.physics.kinematics.state_from_eccentricities` takes as ``rest``."""
+    [`state_from_eccentricities`][jaxcrank.physics.kinematics.state_from_eccentricities] takes as ``rest``."""
     return (y * state_scales(mech))[..., 2 * n_dof(mech) :]
 
 

@@ -3,16 +3,16 @@
 A design gradient takes seconds to run but tens of seconds to trace and compile.
 Two caches, both on disk, make a second process skip that work:
 
-- JAX's persistent compilation cache (:func:`enable`) keeps XLA's compiled
+- JAX's persistent compilation cache ([`enable`][jaxcrank.runs.cache.enable]) keeps XLA's compiled
   executables. JAX stores only programs without host callbacks, so programs meant
-  for it are traced under :func:`checks_as_nan`.
-- :func:`exported` keeps the traced program itself (``jax.export``, serialised
+  for it are traced under [`checks_as_nan`][jaxcrank.runs.cache.checks_as_nan].
+- [`exported`][jaxcrank.runs.cache.exported] keeps the traced program itself (``jax.export``, serialised
   StableHLO), keyed by everything that decides it: the caller's key, the argument
   shapes, the versions of jaxcrank's sources and of JAX, equinox and diffrax, the
   backend and ``XLA_FLAGS``. A hit skips tracing; with the compilation cache also
   warm, the program is ready in about a second.
 
-Both live under one folder (:func:`enable`'s ``path``); deleting it is always safe.
+Both live under one folder ([`enable`][jaxcrank.runs.cache.enable]'s ``path``); deleting it is always safe.
 """
 
 from __future__ import annotations
@@ -48,7 +48,8 @@ def enable(path: str | os.PathLike | None = None) -> Path | None:
 
     Args:
         path: the cache folder. Default: ``$JAXCRANK_CACHE_DIR``, else a folder the
-            user already gave JAX (``JAX_COMPILATION_CACHE_DIR``), else :func:`default_dir`.
+            user already gave JAX (``JAX_COMPILATION_CACHE_DIR``), else [`default_dir`][jaxcrank.runs.cache.default_dir]
+            .
 
     Returns the folder in use, or None when ``$JAXCRANK_CACHE_DIR`` is ``0`` or ``off``
     (and no ``path`` is given).
@@ -70,7 +71,7 @@ def enable(path: str | os.PathLike | None = None) -> Path | None:
 
 
 def folder() -> Path | None:
-    """The folder :func:`enable` set, or None."""
+    """The folder [`enable`][jaxcrank.runs.cache.enable] set, or None."""
     return _folder
 
 
@@ -82,11 +83,11 @@ def checks_as_nan():
     cached; the caller must check their results for NaN.
 
     Equinox offers this only process-wide (``EQX_ON_ERROR=nan``, read once at its
-    import); :func:`jaxcrank._private.equinox_checks_as_nan` sets its module setting
+    import); `jaxcrank._private.equinox_checks_as_nan` sets its module setting
     for the block.
     JAX keeps the traces of inner jitted functions for the process, checks included:
     inside jaxcrank's solve these are only diffrax's checks of the sample times that
-    :func:`jaxcrank.numerics.solve.simulate` builds (increasing, within the span), which cannot fail.
+    [`jaxcrank.numerics.solve.simulate`][] builds (increasing, within the span), which cannot fail.
     """
     with _private.equinox_checks_as_nan():
         yield
@@ -125,8 +126,8 @@ def _key(key, args) -> str | None:
 def exported(fun, key, *args):
     """``fun`` jitted, its trace loaded from the cache folder when an earlier process
     stored one under the same ``key`` and argument shapes, else traced now (under
-    :func:`checks_as_nan`) and stored. Without a cache folder, or with a key pickle
-    cannot write: ``jax.jit(fun)``, traced under :func:`checks_as_nan` at its first call.
+    [`checks_as_nan`][jaxcrank.runs.cache.checks_as_nan]) and stored. Without a cache folder, or with a key pickle
+    cannot write: ``jax.jit(fun)``, traced under [`checks_as_nan`][jaxcrank.runs.cache.checks_as_nan] at its first call.
 
     Args:
         fun: a function of arrays returning arrays (no host callbacks).
@@ -136,7 +137,7 @@ def exported(fun, key, *args):
 
     Returns a jitted callable taking arguments of those shapes. A program that still
     holds a host callback (an inner jitted function this process traced before, outside
-    :func:`checks_as_nan`) is not stored, only jitted.
+    [`checks_as_nan`][jaxcrank.runs.cache.checks_as_nan]) is not stored, only jitted.
     """
     digest = None if _folder is None else _key(key, args)
     if digest is None:
@@ -168,7 +169,8 @@ def exported(fun, key, *args):
 
 
 def _under_checks_as_nan(jitted):
-    """``jitted``, traced (at its first call or ``.lower``) under :func:`checks_as_nan`."""
+    """``jitted``, traced (at its first call or ``.lower``) under [`checks_as_nan`][jaxcrank.runs.cache.checks_as_nan]
+    ."""
 
     @functools.wraps(jitted)
     def call(*args):

@@ -1,6 +1,6 @@
 """Command line: ``jaxcrank simulate [--config FILE | --design RESULT_JSON] [--out DIR]
 [--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]``, ``jaxcrank steady``
-(:mod:`jaxcrank.runs.steady_cli`) and ``jaxcrank optimize`` (:mod:`optim.cli`).
+([`jaxcrank.runs.steady_cli`][]) and ``jaxcrank optimize`` ([`optim.cli`][]).
 
 A command's options are added, and JAX imported, only once the command is named:
 ``jaxcrank --help`` lists the commands without loading JAX."""
@@ -181,7 +181,7 @@ def run_simulate(args) -> int:
 
 
 def _window_label(metrics: dict, period: float) -> str:
-    """What the metrics window of :func:`jaxcrank.analysis.outputs.summary_metrics` was, in words."""
+    """What the metrics window of [`jaxcrank.analysis.outputs.summary_metrics`][] was, in words."""
     start, end = metrics["window_start_s"], metrics["window_end_s"]
     if start == 0.0:
         return f"over the whole run, 0 to {end:g} s (shorter than one crank revolution, {period:g} s)"

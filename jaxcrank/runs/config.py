@@ -1,12 +1,12 @@
-"""Load and save a :class:`~jaxcrank.physics.params.Mechanism` as TOML, and apply
+"""Load and save a [`Mechanism`][jaxcrank.physics.params.Mechanism] as TOML, and apply
 command-line overrides.
 
 The file mirrors the pytree: top-level keys are the mechanism's scalar fields,
 tables ``[joint_B]``, ``[joint_C]``, ``[crank_material]``, ``[rod_material]``,
 ``[slider_material]``, ``[contact]``, ``[friction]`` its parts. Every value is SI
-(see :class:`~jaxcrank.physics.params.Mechanism`). Unknown keys and wrong types are errors.
+(see [`Mechanism`][jaxcrank.physics.params.Mechanism]). Unknown keys and wrong types are errors.
 
-The parameter names are the library's (:func:`jaxcrank.physics.params.set_parameter`):
+The parameter names are the library's ([`jaxcrank.physics.params.set_parameter`][]):
 besides the fields and dotted paths, the top-level keys ``clearance_B`` and
 ``clearance_C`` set a joint's radial clearance (m; the pin shrinks, the hole stays), in
 a file and on the command line (``jaxcrank simulate --set clearance_B=2e-4``) alike.
@@ -165,7 +165,7 @@ def load(path) -> Mechanism:
 
 def load_design(path) -> Mechanism:
     """The final design of a ``jaxcrank optimize`` run: the mechanism in the ``final_mechanism``
-    table of its ``result.json`` (SI, as :func:`to_dict` writes it).
+    table of its ``result.json`` (SI, as [`to_dict`][jaxcrank.runs.config.to_dict] writes it).
 
     Raises:
         ParameterError: naming the file if it is not JSON or has no valid ``final_mechanism``.
@@ -212,7 +212,7 @@ def parse_override(text: str) -> tuple[list[str], object]:
 
 def apply_overrides(mech: Mechanism, overrides: list[str]) -> Mechanism:
     """Apply ``key=value`` overrides (dotted keys for tables; ``clearance_B`` /
-    ``clearance_C`` in m, see :func:`from_dict`) and re-validate.
+    ``clearance_C`` in m, see [`from_dict`][jaxcrank.runs.config.from_dict]) and re-validate.
 
     Raises:
         ParameterError: on a malformed override, an unknown name or an invalid value.

@@ -1,12 +1,12 @@
 """The engines a sweep can solve its designs with.
 
-- ``"xla"``: :func:`jaxcrank.simulate` compiled by XLA (alone or in ``vmap`` batches,
+- ``"xla"``: [`jaxcrank.simulate`][jaxcrank.numerics.solve.simulate] compiled by XLA (alone or in ``vmap`` batches,
   one process or several workers): the differentiable reference;
-- ``"kernel"``: :mod:`jaxcrank.numerics.kernel`, each design's adaptive tsit5 solve in
+- ``"kernel"``: [`jaxcrank.numerics.kernel`][], each design's adaptive tsit5 solve in
   one compiled C function, one design per CPU thread: the same model (generated from
   it), solver, controller and metrics, for throughput. Needs a C compiler.
 
-:func:`default_engine` is the kernel where it can run the sweep, else XLA.
+[`default_engine`][jaxcrank.runs.engines.default_engine] is the kernel where it can run the sweep, else XLA.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ def default_chunk() -> int:
 
 
 def check(engine: str, settings, workers: int) -> None:
-    """Raise :class:`ParameterError` for an unknown engine, or a kernel sweep with a
+    """Raise [`ParameterError`][jaxcrank.physics.params.ParameterError] for an unknown engine, or a kernel sweep with a
     solver other than tsit5, several worker processes, a ``jax.distributed`` job or no
     C compiler."""
     if engine not in ENGINES:
@@ -63,7 +63,7 @@ def check(engine: str, settings, workers: int) -> None:
 
 def kernel_evaluate(base, names, settings, xs):
     """Metrics (n, len(METRICS)), status codes and accepted steps of designs ``xs`` (n, k)
-    by the kernel: :func:`jaxcrank.runs.sweep._evaluate`'s contract."""
+    by the kernel: [`jaxcrank.runs.sweep._evaluate`][jaxcrank.runs.sweep_dispatch.evaluate]'s contract."""
     from ..numerics.kernel import engine
 
     out = engine.solve(base, names, np.asarray(xs), settings)

@@ -1,4 +1,4 @@
-"""Figures in the style of the paper (Figs. 4-10), from :func:`jaxcrank.analysis.outputs.trajectory` columns."""
+"""Figures in the style of the paper (Figs. 4-10), from [`jaxcrank.analysis.outputs.trajectory`][] columns."""
 
 from __future__ import annotations
 
@@ -151,7 +151,7 @@ def _transmission(cols):
 
 def figures(cols, clearances) -> dict:
     """All figures as ``{file name: matplotlib Figure}``. ``cols``: the columns of
-    :func:`jaxcrank.analysis.outputs.trajectory`; ``clearances``: {"B": m, "C": m}.
+    [`jaxcrank.analysis.outputs.trajectory`][]; ``clearances``: {"B": m, "C": m}.
 
     Accelerations, contact forces and the driving moment are scaled to the motion after
     the first crank revolution (the start-up impact, about 50 times larger on the paper
@@ -222,7 +222,8 @@ def _label(col: str) -> str:
 
 
 def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
-    """Figures of a sweep table (:func:`jaxcrank.runs.sweep.read_table`) into ``out_dir``:
+    """Figures of a sweep table ([`jaxcrank.runs.sweep.read_table`][jaxcrank.runs.sweep_table.read_table]) into
+    ``out_dir``:
     heat maps for two-parameter grids, metric-vs-parameter lines (mean and min-max
     band over the other parameters) for grids and one-at-a-time lines, scatter plots
     for LHS / random samples, histograms for Monte Carlo. Failed designs are drawn

@@ -1,15 +1,16 @@
 """Design samplers: tables of designs over named parameters, SI units.
 
 Every sampler returns ``(names, designs)``, the parameter names (any name
-:func:`jaxcrank.physics.params.set_parameter` accepts) and an array of shape
-``(N, len(names))`` of their values, ready for :func:`jaxcrank.runs.sweep.run` or for a
-design problem (:mod:`optim`).
+[`jaxcrank.physics.params.set_parameter`][] accepts) and an array of shape
+``(N, len(names))`` of their values, ready for [`jaxcrank.runs.sweep.run`][] or for a
+design problem (`optim`).
 
-- :func:`full_factorial`: every combination of given levels;
-- :func:`latin_hypercube`, :func:`random_uniform`: ``n`` designs in a box;
-- :func:`one_at_a_time`: one line per variable through a base design;
-- :func:`monte_carlo`: manufactured parts, each parameter drawn from its
-  :class:`Tolerance`.
+- [`full_factorial`][jaxcrank.runs.sampling.full_factorial]: every combination of given levels;
+- [`latin_hypercube`][jaxcrank.runs.sampling.latin_hypercube] ,
+[`random_uniform`][jaxcrank.runs.sampling.random_uniform] : ``n`` designs in a box;
+- [`one_at_a_time`][jaxcrank.runs.sampling.one_at_a_time]: one line per variable through a base design;
+- [`monte_carlo`][jaxcrank.runs.sampling.monte_carlo]: manufactured parts, each parameter drawn from its
+  [`Tolerance`][jaxcrank.runs.sampling.Tolerance].
 """
 
 from __future__ import annotations
@@ -107,7 +108,7 @@ class Tolerance:
 def monte_carlo(
     tolerances: Mapping[str, Tolerance], n: int, seed: int = 0
 ) -> tuple[list[str], Float[np.ndarray, "designs params"]]:
-    """``n`` manufactured parts: every parameter drawn from its :class:`Tolerance`."""
+    """``n`` manufactured parts: every parameter drawn from its [`Tolerance`][jaxcrank.runs.sampling.Tolerance]."""
     rng = np.random.default_rng(seed)
     names = list(tolerances)
     cols = [tolerances[k].nominal + tolerances[k].tolerance * tolerances[k].standard(rng, n) for k in names]

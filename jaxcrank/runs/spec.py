@@ -1,7 +1,7 @@
 """Sweep specifications: a sweep read from a TOML file or dict (``jaxcrank sweep
-SPEC.toml``), next to :mod:`jaxcrank.runs.config` which reads the mechanism part.
+SPEC.toml``), next to [`jaxcrank.runs.config`][] which reads the mechanism part.
 
-Every problem with a spec raises :class:`jaxcrank.ParameterError` naming the key
+Every problem with a spec raises [`jaxcrank.ParameterError`][jaxcrank.physics.params.ParameterError] naming the key
 and what is valid.
 """
 
@@ -24,7 +24,7 @@ _SPEC_KEYS = {"sampling", "samples", "points", "seed", "chunk", "metrics", "para
 
 @dataclasses.dataclass
 class Spec:
-    """A sweep read from TOML by :func:`load_spec` (see ``jaxcrank sweep --help``)."""
+    """A sweep read from TOML by [`load_spec`][jaxcrank.runs.spec.load_spec] (see ``jaxcrank sweep --help``)."""
 
     base: Mechanism
     sampling: str
@@ -37,8 +37,8 @@ class Spec:
 
 
 def spec_from_dict(d: Mapping) -> Spec:
-    """Build a :class:`Spec` from a parsed TOML dict; every problem raises
-    :class:`ParameterError` naming the key."""
+    """Build a [`Spec`][jaxcrank.runs.spec.Spec] from a parsed TOML dict; every problem raises
+    [`ParameterError`][jaxcrank.physics.params.ParameterError] naming the key."""
     bad = set(d) - _SPEC_KEYS
     if bad:
         raise ParameterError(f"unknown sweep spec keys {sorted(bad)}; valid: {sorted(_SPEC_KEYS)}")

@@ -1,5 +1,5 @@
 """``jaxcrank steady [--config FILE] [--set KEY=VALUE ...] --out DIR``: the steady state
-of a mechanism (:func:`jaxcrank.numerics.steady.steady_state`) with its summary, one
+of a mechanism ([`jaxcrank.numerics.steady.steady_state`][]) with its summary, one
 period of the orbit, its figures and a Poincare-section plot."""
 
 from __future__ import annotations

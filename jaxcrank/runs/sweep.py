@@ -1,10 +1,12 @@
 """Sweeps: many designs of one mechanism, one at a time or in ``vmap`` batches.
 
 A sweep is a table of designs over named parameters (any name
-:func:`jaxcrank.physics.params.set_parameter` accepts: ``rod_length``,
+[`jaxcrank.physics.params.set_parameter`][] accepts: ``rod_length``,
 ``contact.restitution``, ``clearance_B``, ...), built by a sampler
-(:func:`full_factorial`, :func:`latin_hypercube`, :func:`random_uniform`,
-:func:`one_at_a_time`, :func:`monte_carlo`) and run by :func:`run`:
+([`full_factorial`][jaxcrank.runs.sampling.full_factorial], [`latin_hypercube`][jaxcrank.runs.sampling.latin_hypercube]
+, [`random_uniform`][jaxcrank.runs.sampling.random_uniform] ,
+[`one_at_a_time`][jaxcrank.runs.sampling.one_at_a_time] , [`monte_carlo`][jaxcrank.runs.sampling.monte_carlo] ) and run
+by [`run`][jaxcrank.runs.sweep.run] :
 
 - each design is checked on the host first (an invalid one, e.g. a
   non-assemblable geometry, gets ``status = "invalid"`` and the parameter error as
@@ -18,37 +20,38 @@ A sweep is a table of designs over named parameters (any name
   batch, each batch in one ``write`` (a killed process leaves whole batches), so a
   killed sweep resumed with ``resume=True`` only solves what is missing; a table or
   ``designs.npy`` that is truncated, corrupted or from another sweep raises
-  :class:`~jaxcrank.CorruptFileError` naming the file, never a silent restart;
+  [`CorruptFileError`][jaxcrank.errors.CorruptFileError] naming the file, never a silent restart;
 - a chunk is a ``jax.Array`` sharded over every device of every process of a
   ``jax.distributed`` job; each device solves its shard with its own compiled solve
-  (no per-step collective; see :func:`jaxcrank.runs.sweep_dispatch.evaluate`);
+  (no per-step collective; see [`jaxcrank.runs.sweep_dispatch.evaluate`][]);
 - ``workers = N`` solves chunks in N local processes (one per CPU core), the way to
   use several cores of one machine: XLA compiles the solver loop into one
-  single-threaded kernel (:mod:`jaxcrank.numerics.runtime`), and several host devices in one
+  single-threaded kernel ([`jaxcrank.numerics.runtime`][]), and several host devices in one
   process do not run at the same time.
 
 Which chunk is fastest depends on the device (``bench/bench_sweep.py``): on a CPU a
 design solved alone (``chunk = 1`` per device, the default there) beats any ``vmap``
 batch, which steps every member until the slowest one finishes and selects each
 update per member; a GPU needs batches of thousands (default: the largest batch that fits
-in its free memory, :func:`default_chunk`).
+in its free memory, [`default_chunk`][jaxcrank.runs.sweep_dispatch.default_chunk]).
 
 Reproducibility: a design's numbers do not depend on its batch mates, its position
 in the batch, the batch size (>= 2), the number of devices, processes or workers
-(with :mod:`jaxcrank.numerics.runtime`'s XLA options: no FMA contraction, which otherwise
+(with [`jaxcrank.numerics.runtime`][]'s XLA options: no FMA contraction, which otherwise
 rounds differently per lane and batch size). Solving alone (one design per device)
 and in a batch are two compiled programs that round differently in the last bit,
 which impact chaos amplifies (1e-5..1e-3 relative after 3 ms): a resumed sweep must
 keep its chunk per device on the same side of that line.
 
-The headline metrics are :data:`METRICS` (after the first revolution by default),
+The headline metrics are `METRICS` (after the first revolution by default),
 the same numbers ``jaxcrank simulate`` writes to ``summary.json``.
 
-This module runs a sweep (:func:`run`, :func:`summarize`); its parts live beside it and
+This module runs a sweep ([`run`][jaxcrank.runs.sweep.run], [`summarize`][jaxcrank.runs.sweep.summarize] ); its parts
+live beside it and
 their public names are re-exported here: one design's settings and solve
-(:mod:`jaxcrank.runs.sweep_design`), memory planning and sharded dispatch
-(:mod:`jaxcrank.runs.sweep_dispatch`), the table and atomic I/O
-(:mod:`jaxcrank.runs.sweep_table`) and worker processes (:mod:`jaxcrank.runs.sweep_workers`).
+([`jaxcrank.runs.sweep_design`][]), memory planning and sharded dispatch
+([`jaxcrank.runs.sweep_dispatch`][]), the table and atomic I/O
+([`jaxcrank.runs.sweep_table`][]) and worker processes ([`jaxcrank.runs.sweep_workers`][]).
 """
 
 from __future__ import annotations
@@ -113,13 +116,13 @@ def run(
     progress: bool = True,
     engine: str = "xla",
 ) -> dict[str, Shaped[np.ndarray, " designs"]]:
-    """Simulate every design and return the table (as :func:`read_table`).
+    """Simulate every design and return the table (as [`read_table`][jaxcrank.runs.sweep_table.read_table]).
 
     Args:
         base: the mechanism every design starts from.
-        names: parameter names (see :func:`jaxcrank.physics.params.set_parameter`).
+        names: parameter names (see [`jaxcrank.physics.params.set_parameter`][]).
         designs: (N, len(names)) parameter values, SI.
-        settings: how each design is simulated (default :class:`SweepSettings`).
+        settings: how each design is simulated (default [`SweepSettings`][jaxcrank.runs.sweep_design.SweepSettings]).
         out: directory for ``table.csv`` and ``designs.npy``, appended after every
             batch; without it the table is only returned.
         resume: continue the sweep in ``out``: designs already in the table are
@@ -127,14 +130,14 @@ def run(
         chunk: designs solved together (rounded up to a multiple of the device count;
             one per device: each solved alone, several: a ``vmap`` batch per device);
             bounds memory and is the checkpoint granularity. Default
-            :func:`default_chunk`.
+            [`default_chunk`][jaxcrank.runs.sweep_dispatch.default_chunk].
         workers: local processes that solve chunks in parallel (one per CPU core is
             the fastest on a CPU); 1 solves in this process. Not with ``jax.distributed``.
         progress: tqdm progress bar.
         engine: ``"xla"`` (the compiled JAX solve above) or ``"kernel"`` (the
-            per-trajectory C kernel of :mod:`jaxcrank.numerics.kernel`: tsit5 only, one
+            per-trajectory C kernel of [`jaxcrank.numerics.kernel`][]: tsit5 only, one
             design per CPU thread, ``workers`` must be 1; ``chunk`` is then the designs per
-            kernel call and checkpoint, default :func:`jaxcrank.runs.engines.default_chunk`).
+            kernel call and checkpoint, default [`jaxcrank.runs.engines.default_chunk`][]).
             Same table, statuses and resume; a resumed sweep keeps its engine (the two
             round differently, which impact chaos amplifies).
     """

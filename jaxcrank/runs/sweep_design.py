@@ -1,5 +1,5 @@
-"""One design of a sweep: how it is simulated (:class:`SweepSettings`), its solve
-(:func:`simulate_design`) and its status codes (:data:`STATUSES`)."""
+"""One design of a sweep: how it is simulated ([`SweepSettings`][jaxcrank.runs.sweep_design.SweepSettings]), its solve
+([`simulate_design`][jaxcrank.runs.sweep_design.simulate_design]) and its status codes (`STATUSES`)."""
 
 from __future__ import annotations
 
@@ -41,8 +41,8 @@ class SweepSettings:
         samples_per_revolution: output samples per revolution (3600: every 0.1 deg,
             as ``jaxcrank simulate``); peaks are taken over these samples.
         metrics_from_revolution: metrics cover t > this many revolutions (default 1).
-        options: the solver settings (:class:`jaxcrank.numerics.solve.SolveOptions`,
-            default :data:`jaxcrank.numerics.solve.DEFAULTS`).
+        options: the solver settings ([`jaxcrank.numerics.solve.SolveOptions`][],
+            default `jaxcrank.numerics.solve.DEFAULTS`).
 
     Raises:
         ParameterError: for a setting out of its range.
@@ -73,7 +73,7 @@ class SweepSettings:
     @classmethod
     def from_text(cls, table: Mapping) -> SweepSettings:
         """Settings from a sweep spec's ``[simulation]`` table: the fields above but
-        ``options``, and the solver settings :data:`SOLVE_KEYS` (the solver by name).
+        ``options``, and the solver settings `SOLVE_KEYS` (the solver by name).
 
         Raises:
             ParameterError: for an unknown key (the message lists the valid ones) or a
@@ -91,7 +91,8 @@ class SweepSettings:
         return cls(**{k: table[k] for k in own if k in table}, options=options)
 
     def to_text(self) -> dict:
-        """The flat ``[simulation]`` table of :meth:`from_text` (solver by name)."""
+        """The flat ``[simulation]`` table of [`from_text`][jaxcrank.runs.sweep_design.SweepSettings.from_text] (solver
+        by name)."""
         return {
             "revolutions": self.revolutions,
             "samples_per_revolution": self.samples_per_revolution,
@@ -121,7 +122,7 @@ def simulate_design(
 ) -> tuple[dict[str, Float[Array, ""]], Int[Array, ""], Int[Array, ""]]:
     """One design: ``base`` with ``names`` set to ``x`` (SI), simulated with
     ``throw=False``. Returns (metrics dict, status code (index into
-    :data:`STATUSES`), accepted steps). Traceable; :func:`run` vmaps it."""
+    `STATUSES`), accepted steps). Traceable; `run` vmaps it."""
     settings = SweepSettings() if settings is None else settings
     mech = set_parameters(base, names, x)
     # metrics tracked during the solve: no sample is stored (memory per design is
@@ -144,7 +145,7 @@ def simulate_design(
 
 
 def validate(mech: Mechanism) -> Mechanism:
-    """Re-check every parameter of ``mech`` (raises :class:`ParameterError` naming
+    """Re-check every parameter of ``mech`` (raises [`ParameterError`][jaxcrank.physics.params.ParameterError] naming
     the parameter and its range): ``set_parameter`` does not re-validate."""
     return config.from_dict(config.to_dict(mech))
 

@@ -1,6 +1,7 @@
 """Running the designs of a sweep on the devices: the compiled solve of a device's shard,
-the memory plan that sizes a batch (:func:`chunk_that_fits`), and the dispatch of a chunk
-sharded over every device of every process (:func:`evaluate`)."""
+the memory plan that sizes a batch ([`chunk_that_fits`][jaxcrank.runs.sweep_dispatch.chunk_that_fits]), and the dispatch
+of a chunk
+sharded over every device of every process ([`evaluate`][jaxcrank.runs.sweep_dispatch.evaluate])."""
 
 from __future__ import annotations
 
@@ -86,7 +87,8 @@ def free_device_bytes() -> int | None:
 def default_chunk(base: Mechanism | None = None, names: Sequence[str] = (), settings: Settings | None = None) -> int:
     """Designs per chunk when none is given: one per device on a CPU (each solved
     alone); elsewhere (a GPU needs large batches) the largest batch per device that fits
-    its free memory (:func:`chunk_that_fits`, given the sweep), else 1024 per device."""
+    its free memory ([`chunk_that_fits`][jaxcrank.runs.sweep_dispatch.chunk_that_fits], given the sweep), else 1024 per
+    device."""
     if jax.default_backend() == "cpu":
         return jax.device_count()
     free = free_device_bytes()
@@ -97,7 +99,8 @@ def default_chunk(base: Mechanism | None = None, names: Sequence[str] = (), sett
 
 def resolve_chunk(base: Mechanism, names: Sequence[str], settings: Settings, chunk: int | None = None) -> int:
     """The designs per chunk a sweep of ``names`` over ``base`` uses: ``chunk``
-    (default :func:`default_chunk` for this sweep) rounded up to a multiple of the
+    (default [`default_chunk`][jaxcrank.runs.sweep_dispatch.default_chunk] for this sweep) rounded up to a multiple of
+    the
     device count.
 
     Raises:
@@ -113,7 +116,8 @@ def resolve_chunk(base: Mechanism, names: Sequence[str], settings: Settings, chu
 def check_chunk_fits(
     base: Mechanism, names: Sequence[str], settings: Settings, chunk: int, free_bytes: float | None
 ) -> None:
-    """Raise :class:`ParameterError` naming ``chunk`` and the size that would fit when
+    """Raise [`ParameterError`][jaxcrank.physics.params.ParameterError] naming ``chunk`` and the size that would fit
+    when
     a batch of ``chunk`` designs per device needs more than ``free_bytes`` (no check
     when ``free_bytes`` is None, e.g. on a CPU, or for one design per device)."""
     if free_bytes is None or chunk <= 1:
@@ -133,7 +137,7 @@ def evaluate(base, names, settings, xs):
 
     The batch is a ``jax.Array`` sharded over all devices of all processes
     (``NamedSharding`` over a 1-D mesh); each addressable shard is solved by the
-    same compiled executable (:func:`_batch_fn`) on its own device, dispatched asynchronously,
+    same compiled executable (`_batch_fn`) on its own device, dispatched asynchronously,
     and the results are assembled into sharded arrays again. Neither
     ``jit`` of the sharded batch (XLA then puts an all-reduce of the while loop's
     stop test in every solver step) nor ``shard_map`` (implicit diffrax solvers

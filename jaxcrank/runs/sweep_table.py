@@ -20,7 +20,7 @@ from .sweep_design import STATUSES
 
 def columns(names: Sequence[str]) -> list[str]:
     """Column names of a sweep table over ``names``: ``index``, one ``<name>_<unit>``
-    per parameter, ``status``, ``message``, :data:`METRICS`, ``steps``."""
+    per parameter, ``status``, ``message``, `METRICS`, ``steps``."""
     return ["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + ["status", "message"] + list(METRICS) + ["steps"]
 
 
@@ -69,7 +69,8 @@ def read_table(path) -> dict[str, Shaped[np.ndarray, " rows"]]:
 
 
 def table_from_rows(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
-    """Rows of CSV cells (strings) as columns sorted by ``index`` (see :func:`read_table`)."""
+    """Rows of CSV cells (strings) as columns sorted by ``index`` (see
+    [`read_table`][jaxcrank.runs.sweep_table.read_table] )."""
     if not rows:
         return {}
     rows = sorted(rows, key=lambda r: int(r["index"]))

@@ -3,7 +3,7 @@
 Each task carries what it needs (the base mechanism as a parameter dict, the
 parameter names, the settings and the chunk's designs), so a worker keeps no module
 state: the mechanism is rebuilt per chunk (microseconds), and the compiled solve is
-reused from :func:`jaxcrank.runs.sweep_dispatch.evaluate`'s cache.
+reused from [`jaxcrank.runs.sweep_dispatch.evaluate`][]'s cache.
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Validation rigs: runs that check the model against facts, not parts of a simulation.
 
-- :mod:`~jaxcrank.analysis.validation.wall_impact`: a free pin hitting a bearing wall,
+- [`wall_impact`][jaxcrank.analysis.validation.wall_impact]: a free pin hitting a bearing wall,
   each contact law's achieved restitution against the exact relation;
-- :mod:`~jaxcrank.analysis.validation.memory_audit`: the approach-speed memory against
+- [`memory_audit`][jaxcrank.analysis.validation.memory_audit]: the approach-speed memory against
   the true normal speed at every contact onset of a run;
-- :mod:`~jaxcrank.analysis.validation.events`: what both share, the dense solve and the
+- [`events`][jaxcrank.analysis.validation.events]: what both share, the dense solve and the
   location of zero crossings by bisection.
 """

@@ -1,6 +1,7 @@
 """The solve and event location the validation rigs share: one ``diffeqsolve`` with
-dense output (:func:`dense_solve`) and the zero crossings of a scalar function of time,
-bracketed on a grid and located by bisection (:func:`crossings`)."""
+dense output ([`dense_solve`][jaxcrank.analysis.validation.events.dense_solve]) and the zero crossings of a scalar
+function of time,
+bracketed on a grid and located by bisection ([`crossings`][jaxcrank.analysis.validation.events.crossings])."""
 
 from __future__ import annotations
 

@@ -3,8 +3,9 @@ the approach speed the damping uses against the true normal speed just before on
 
 The contact laws divide by ``delta_dot_minus``, the normal speed at the onset of an
 impact (model.md); jaxcrank carries it as a memory state per clearance joint
-(:func:`jaxcrank.physics.model.memory_tracking`). :func:`onsets` solves a run as
-:func:`jaxcrank.simulate` does (same solver, controller and tolerances), keeps every
+([`jaxcrank.physics.model.memory_tracking`][jaxcrank.physics.memory.memory_tracking]).
+[`onsets`][jaxcrank.analysis.validation.memory_audit.onsets] solves a run as
+[`jaxcrank.simulate`][jaxcrank.numerics.solve.simulate] does (same solver, controller and tolerances), keeps every
 accepted step and the solver's dense output, finds each step in which a penetration
 delta crosses zero upwards, locates the crossing by bisection on the dense output,
 and there compares
@@ -112,8 +113,9 @@ def onsets(
     bisections=60,
 ) -> Onsets:
     """Every contact onset of the run of ``mech`` from ``t0`` to ``t1`` (s) with the
-    numerical settings ``options`` (:class:`jaxcrank.SolveOptions`; the step budget
-    is ``max_steps``, which also sizes the stored steps). Returns :class:`Onsets`."""
+    numerical settings ``options`` ([`jaxcrank.SolveOptions`][jaxcrank.numerics.solve.SolveOptions]; the step budget
+    is ``max_steps``, which also sizes the stored steps). Returns
+    [`Onsets`][jaxcrank.analysis.validation.memory_audit.Onsets] ."""
     solver = options.solver
     controller = solve.step_size_controller(solver, options.rtol, options.atol)
     y0 = model.initial_state(mech) if y0 is None else y0

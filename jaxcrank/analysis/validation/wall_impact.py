@@ -1,13 +1,15 @@
 """Validation rig: impacts of a free pin on a bearing wall, through the same joint model
-as the mechanism (:func:`jaxcrank.physics.contact.joint_contact` and its approach-speed
+as the mechanism ([`jaxcrank.physics.contact.joint_contact`][] and its approach-speed
 memory).
 Used to check each contact law's achieved restitution against the exact relation
 ``chi (1 + e) = ln((1 + chi) / (1 - chi e))`` (model.md):
 
-* :func:`rebound_ratio`: one impact on a fixed wall;
-* :func:`reimpact`: a pin that rebounds and is caught again by the wall a few
+* [`rebound_ratio`][jaxcrank.analysis.validation.wall_impact.rebound_ratio]: one impact on a fixed wall;
+* [`reimpact`][jaxcrank.analysis.validation.wall_impact.reimpact] : a pin that rebounds and is caught again by the wall
+a few
   microseconds after separating (the memory must forget the first impact);
-* :func:`slow_approach`: an impact at a slow approach speed reached under a normal
+* [`slow_approach`][jaxcrank.analysis.validation.wall_impact.slow_approach] : an impact at a slow approach speed reached
+under a normal
   acceleration through the last microseconds before onset (the memory must follow
   the speed up to onset).
 
@@ -69,7 +71,7 @@ def _hole_acceleration(t, breaks, accelerations):
 def _wall_field(t, y, args):
     """dy/dt of y = (pin x, pin v, hole x, hole v, memory) for a free pin (mass
     ``pin_mass``, kg) in joint B's bearing whose hole moves along x with the piecewise
-    constant acceleration of :func:`_hole_acceleration`; ``args = (mech, pin_mass,
+    constant acceleration of `_hole_acceleration`; ``args = (mech, pin_mass,
     breaks, accelerations)``."""
     mech, pin_mass, breaks, accelerations = args
     joint = mech.joint_B
@@ -109,7 +111,7 @@ def _penetration(mech, y):
 def _crossings(mech, sol, t0, t1, n=4000, upward=True):
     """Times in (t0, t1) where the penetration crosses zero upwards (or downwards),
     bracketed on ``n`` equally spaced times and located by bisection on the dense
-    output (:func:`jaxcrank.analysis.validation.events.crossings`)."""
+    output ([`jaxcrank.analysis.validation.events.crossings`][])."""
     penetration = jax.jit(jax.vmap(lambda t: _penetration(mech, sol.evaluate(t))))
     ts = np.linspace(t0, t1, n)
     lo, hi = crossings(penetration, ts, penetration(ts), upward=upward)
@@ -117,7 +119,8 @@ def _crossings(mech, sol, t0, t1, n=4000, upward=True):
 
 
 class WallImpact(NamedTuple):
-    """One impact of a :func:`reimpact` or :func:`slow_approach` run (SI).
+    """One impact of a [`reimpact`][jaxcrank.analysis.validation.wall_impact.reimpact] or
+    [`slow_approach`][jaxcrank.analysis.validation.wall_impact.slow_approach] run (SI).
 
     Attributes:
         restitution: relative rebound speed / relative approach speed at onset.
@@ -134,7 +137,8 @@ class WallImpact(NamedTuple):
 
 
 def _wall_impact(mech: Mechanism, sol, onset: float, since_separation: float, what: str) -> WallImpact:
-    """The :class:`WallImpact` of the impact of ``sol`` (a :func:`_solve_wall` solution)
+    """The [`WallImpact`][jaxcrank.analysis.validation.wall_impact.WallImpact] of the impact of ``sol`` (a `_solve_wall`
+    solution)
     that starts at ``onset`` (s) and must have ended by the end of the run (else
     RuntimeError naming ``what``)."""
     y_on = np.asarray(sol.evaluate(onset))

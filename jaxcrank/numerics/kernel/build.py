@@ -8,7 +8,7 @@ and renames it, so concurrent processes never load a half-written library.
 
 Flags: ``-O3 -march=native`` (the machine's vector instructions),
 ``-ffp-contract=off`` (no fused multiply-add: the rounding of XLA's CPU programs
-under :mod:`jaxcrank.numerics.runtime`), ``-fno-math-errno`` (inline square roots;
+under [`jaxcrank.numerics.runtime`][]), ``-fno-math-errno`` (inline square roots;
 no change of values) and ``-fopenmp`` (one trajectory per thread).
 """
 

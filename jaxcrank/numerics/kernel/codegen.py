@@ -1,19 +1,20 @@
 """C code from a JAX function's jaxpr: the kernel's single source of truth.
 
-:func:`emit_function` traces a function of fixed-shape float64 arrays with
-:func:`jax.make_jaxpr` and writes it as one straight-line C function: every array
+[`emit_function`][jaxcrank.numerics.kernel.codegen.emit_function] traces a function of fixed-shape float64 arrays with
+`jax.make_jaxpr` and writes it as one straight-line C function: every array
 element becomes a local (``const KD vN = ...;``); slicing, reshaping, broadcasting,
 stacking and concatenation only rearrange names and emit nothing; dot products and
 reductions are written out as sums, scans unrolled, run-time indexing written as
-selects (:mod:`.indexing`). Nested ``jit`` and custom-derivative calls are inlined
+selects (`jaxcrank.numerics.kernel.indexing`). Nested ``jit`` and custom-derivative calls are inlined
 (their primal jaxpr); identical expressions are computed once. Only primitives with an
-exact translation are accepted; anything else raises :class:`UnsupportedPrimitive`
+exact translation are accepted; anything else raises
+`jaxcrank.numerics.kernel.text.UnsupportedPrimitive`
 naming it, so a model change that needs a new primitive fails at generation time,
 never silently in the kernel.
 
 The text is written in a small macro vocabulary (types ``KD``/``KB``/``KL``, selects
 ``KSEL``, logic ``KAND``, libm calls ``KF1(sin, x)``, ...) that
-:mod:`.source` instantiates twice: for scalars (C and CUDA C++) and for GCC vectors of
+`.source` instantiates twice: for scalars (C and CUDA C++) and for GCC vectors of
 four designs, one per lane. Rounding follows XLA's CPU lowering where it matters:
 ``integer_pow`` is the same chain of multiplications, ``max``/``min`` propagate NaN,
 ``asin`` is XLA's decomposition, ``rsqrt`` is ``1 / sqrt``; sums of dot products may

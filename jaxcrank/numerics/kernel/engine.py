@@ -1,9 +1,10 @@
 """Running batches of designs through the compiled kernel (CPU, OpenMP).
 
-:func:`solve` is the kernel's counterpart of the JAX path's
-:func:`jaxcrank.runs.sweep.simulate_design` over many designs: each design's adaptive
+[`solve`][jaxcrank.numerics.kernel.engine.solve] is the kernel's counterpart of the JAX path's
+[`jaxcrank.runs.sweep.simulate_design`][jaxcrank.runs.sweep_design.simulate_design] over many designs: each design's
+adaptive
 tsit5 solve from the pins-centred start, with the headline metrics accumulated in the
-kernel, and the same status codes (:data:`jaxcrank.runs.sweep.STATUSES` order: 0 ok,
+kernel, and the same status codes (`jaxcrank.runs.sweep.STATUSES` order: 0 ok,
 1 max_steps, 3 non_finite). Designs are independent: one per thread, each with its
 own steps, so a design's numbers do not depend on its batch mates, the batch size or
 the thread count.
@@ -30,7 +31,7 @@ class Batch(NamedTuple):
     """What the kernel returns for a batch of n designs.
 
     Attributes:
-        metrics: (n, len(METRICS)) in :data:`jaxcrank.analysis.metrics.METRICS` order, units in the names.
+        metrics: (n, len(METRICS)) in `jaxcrank.analysis.metrics.METRICS` order, units in the names.
         status: (n,) status codes (0 ok, 1 max_steps, 3 non_finite).
         steps: (n,) accepted steps. rejected: (n,) rejected steps.
         y: (n, state) scaled state at the end (where the solve stopped).
@@ -66,7 +67,7 @@ def default_threads() -> int:
 
 def finish(peaks, sums, count) -> np.ndarray:
     """The metrics (n, len(METRICS)) from the kernel's accumulators, as
-    :func:`jaxcrank.numerics.tracking.finish` computes them."""
+    [`jaxcrank.numerics.tracking.finish`][] computes them."""
     out = {k: peaks[:, j] for j, k in enumerate(metrics.PEAK_METRICS)}
     rms = np.sqrt(sums / np.maximum(count, 1)[:, None])
     out.update({k: rms[:, j] for j, k in enumerate(metrics.RMS_METRICS)})
@@ -89,16 +90,20 @@ def solve_mechanisms(
 ) -> Batch:
     """Solve each mechanism from 0 to its ``t_end`` (s) with tsit5, tracking the
     headline metrics over ``t > t_start`` (s) with ``n_samples`` equally spaced RMS
-    sample times from 0 to ``t_end`` (as :func:`jaxcrank.simulate` with
+    sample times from 0 to ``t_end`` (as [`jaxcrank.simulate`][jaxcrank.numerics.solve.simulate] with
     ``metrics_start``). All mechanisms must share one structure (laws, ideal joints).
 
     Args:
         mechs: the designs.
-        t_end, t_start: per design, s.
+        t_end: per design, s (the same for t_start).
+        t_start: per design, s (the same for t_end).
         n_samples: RMS sample times per design, >= 2.
-        rtol, atol, dt0, max_steps: as :class:`jaxcrank.numerics.solve.SolveOptions`.
+        rtol: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for atol, dt0, max_steps).
+        atol: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for rtol, dt0, max_steps).
+        dt0: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for rtol, atol, max_steps).
+        max_steps: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for rtol, atol, dt0).
         y0: (n, state) scaled initial states (default pins centred, zeros).
-        threads: OpenMP threads (default :func:`default_threads`).
+        threads: OpenMP threads (default [`default_threads`][jaxcrank.numerics.kernel.engine.default_threads]).
         vector: solve four designs per thread, one per vector lane (the default; the
             numbers equal the one-design-per-thread loop's bit for bit, which
             ``vector=False`` runs).
@@ -150,7 +155,7 @@ def solve(
     base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, threads: int | None = None, vector: bool = True
 ) -> Batch:
     """Designs ``xs`` (n, len(names)) of ``base`` (SI values of ``names``), simulated as
-    a sweep's :class:`jaxcrank.runs.sweep.Settings` asks (revolutions, samples,
+    a sweep's [`jaxcrank.runs.sweep.Settings`][jaxcrank.runs.sweep_design.SweepSettings] asks (revolutions, samples,
     metrics window, tolerances, step budget).
 
     Raises:

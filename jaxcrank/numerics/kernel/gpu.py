@@ -1,7 +1,7 @@
 """The kernel on an NVIDIA GPU: the same generated source compiled as CUDA by NVRTC
 (through CuPy), one trajectory per GPU thread.
 
-The source is the CPU kernel's (:func:`jaxcrank.numerics.kernel.source.kernel_source`);
+The source is the CPU kernel's ([`jaxcrank.numerics.kernel.source.kernel_source`][]);
 under ``__CUDACC__`` its functions are ``__device__`` functions and its entry point
 is the ``__global__`` ``jk_solve_gpu``. It is compiled with ``--fmad=false`` (no fused
 multiply-add, the rounding of the CPU kernel and of XLA's CPU programs). Needs CuPy
@@ -49,7 +49,7 @@ def compile_seconds(st: source.Structure) -> float:
 
 
 def solve(base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, block: int = 128) -> engine.Batch:
-    """:func:`jaxcrank.numerics.kernel.engine.solve` on the GPU: the same arguments and
+    """[`jaxcrank.numerics.kernel.engine.solve`][] on the GPU: the same arguments and
     results (host arrays), ``block`` threads per CUDA block.
 
     Raises:

@@ -1,4 +1,4 @@
-"""Array-structured primitives for :mod:`jaxcrank.numerics.kernel.codegen`: dot
+"""Array-structured primitives for [`jaxcrank.numerics.kernel.codegen`][]: dot
 products and reductions written out as sums, scans unrolled, and indexing by run-time
 values (``argmax``, dynamic slices) written as selects over every position. Emits the
 same macro vocabulary as the generator (``KSEL``, ``KAND``, ...)."""

@@ -1,18 +1,20 @@
 """The kernel's C source for one mechanism structure: generated model functions plus
 the adaptive Tsitouras 5(4) loop of ``solver.c``.
 
-A *structure* (:class:`Structure`) is what changes the traced code: the contact and
+A *structure* ([`Structure`][jaxcrank.numerics.kernel.source.Structure]) is what changes the traced code: the contact
+and
 friction laws, which joints are ideal, and the layout of the parameter pytree. Every
 float parameter is a run-time input (a row of the ``params`` matrix, in
-:func:`parameter_vector` order), so one compiled library serves every design of a
+[`parameter_vector`][jaxcrank.numerics.kernel.source.parameter_vector] order), so one compiled library serves every
+design of a
 structure, whatever the swept parameters.
 
-Three functions are generated from JAX (:mod:`.codegen`):
+Three functions are generated from JAX ([`.codegen`][jaxcrank.numerics.kernel.codegen]):
 
-- ``jk_field(p, t, y, rate)``: :func:`jaxcrank.physics.model.vector_field`;
+- ``jk_field(p, t, y, rate)``: [`jaxcrank.physics.model.vector_field`][jaxcrank.physics.dynamics.vector_field];
 - ``jk_frame(p, t, y, rate, peak, rms)``: the same rate plus the per-step signals of
-  the peak metrics and the RMS metrics (:mod:`jaxcrank.numerics.tracking`'s
-  definitions, from :func:`jaxcrank.physics.model.evaluate`);
+  the peak metrics and the RMS metrics ([`jaxcrank.numerics.tracking`][]'s
+  definitions, from [`jaxcrank.physics.model.evaluate`][jaxcrank.physics.frame.evaluate]);
 - ``jk_interp(t0, t1, y0, k, t, y)``: diffrax's Tsit5 dense output.
 
 The tableau and the controller's constants are read from diffrax's objects here, so
@@ -46,8 +48,8 @@ class Structure(NamedTuple):
         constants: the values of every float parameter, baked into the code as
             literals (the compiler folds them), with ``names`` the run-time inputs;
             or ``None``: every float parameter is a run-time input
-            (:func:`parameter_vector` order).
-        names: the parameters (:func:`jaxcrank.physics.params.set_parameter` names)
+            ([`parameter_vector`][jaxcrank.numerics.kernel.source.parameter_vector] order).
+        names: the parameters ([`jaxcrank.physics.params.set_parameter`][] names)
             that are run-time inputs when ``constants`` is given.
     """
 
@@ -57,7 +59,7 @@ class Structure(NamedTuple):
 
 
 def structure(mech: Mechanism, names: Sequence[str] | None = None) -> Structure:
-    """The :class:`Structure` of ``mech``: every float parameter a run-time input
+    """The [`Structure`][jaxcrank.numerics.kernel.source.Structure] of ``mech``: every float parameter a run-time input
     (``names`` None), or ``mech``'s values baked in and only ``names`` as inputs
     (a sweep over ``names``: per-design code for the parameters that do not vary)."""
     leaves, treedef = jax.tree_util.tree_flatten(mech)

@@ -1,4 +1,4 @@
-"""The generated code's vocabulary shared by :mod:`.codegen` and :mod:`.indexing`:
+"""The generated code's vocabulary shared by `.codegen` and `.indexing`:
 literals, the type macros, and the writer that names every emitted expression."""
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ def literal(value) -> str:
 
 
 def _value(expr):
-    """The Python value of a literal written by :func:`literal`, or None for a C expression."""
+    """The Python value of a literal written by [`literal`][jaxcrank.numerics.kernel.text.literal] , or None for a C
+    expression."""
     if not isinstance(expr, str):
         return None
     if expr.endswith("L") and expr[:-1].lstrip("-").isdigit():
