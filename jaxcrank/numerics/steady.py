@@ -4,8 +4,7 @@ The equations of motion are periodic in time with the crank period T = 2 pi / om
 (the crank turns at constant speed), so the state sampled once per revolution, at
 t = n T (the crank back at its initial angle), is a **Poincare section**, and one
 revolution is a map ``Phi: y(nT) -> y((n + 1) T)`` of the scaled state
-([`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales]).
-[`steady_state`][jaxcrank.numerics.steady.steady_state]
+([`state_scales`][jaxcrank.physics.state.state_scales]). [`steady_state`][jaxcrank.numerics.steady.steady_state]
 
 1. **settles**: simulates ``settle_revolutions`` revolutions from pins-centred rest
    (or from ``warm_start``) and keeps the section points;
@@ -44,8 +43,7 @@ idle (``SteadyState.active``).
 held), so ``jax.jvp`` / ``jax.jacfwd`` of any function of the steady state are exact.
 Forward mode only (the tangent of Phi goes through ``diffrax.ForwardMode``): design
 problems have few variables. [`steady_value_and_grad`][jaxcrank.numerics.steady.steady_value_and_grad] wraps it for a
-functional
-of one period of the orbit. The building blocks (maps, Newton, batch means) live in
+functional of one period of the orbit. The building blocks (maps, Newton, batch means) live in
 [`jaxcrank.numerics.shooting`][].
 
 Example::
