@@ -8,7 +8,8 @@ read the metric definitions of ``analysis.metrics``, which need the physics alon
 - ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``, ``steady``;
 - ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
   ``analysis.validation`` (``wall_impact``, ``memory_audit``);
-- ``jaxcrank.runs``: ``sweep``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``.
+- ``jaxcrank.runs``: ``sweep``, ``engines``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``,
+  ``steady_cli``.
 
 Importing jaxcrank turns on float64 and adds two XLA CPU options to ``XLA_FLAGS``
 ([`jaxcrank.numerics.runtime`][]): a documented, process-wide decision; what it changes
