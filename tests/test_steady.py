@@ -156,7 +156,7 @@ def _settled(u, revolutions=30):
     """A long plain simulation from rest (no shooting): the mechanism and its section
     state after ``revolutions``."""
     mech = _build(jnp.asarray(u))
-    ts = jnp.arange(revolutions + 1) * float(mech.period)
+    ts = jnp.arange(revolutions + 1.0) * float(mech.period)
     sim = jc.simulate(mech, ts=ts, rtol=1e-10, atol=1e-10, max_steps=10_000_000)
     return mech, sim.ys[-1]
 
