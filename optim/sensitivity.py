@@ -161,11 +161,12 @@ def window_gradients(mech: Mechanism, starts: W.Starts, obj: Ensemble = Ensemble
     def is_float(x):
         return isinstance(x, float) or (isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.inexact))
 
+    grid = obj.grid(mech)  # the sample grid of the concrete design (crank speed)
     params, static = eqx.partition(mech, is_float)
     params = jax.tree.map(lambda x: jax.lax.stop_gradient(jnp.asarray(x)), params)
 
     def one(p, i):
-        sums, ok = obj.window_sums(eqx.combine(p, static), starts, i)
+        sums, ok = obj.window_sums(eqx.combine(p, static), starts, i, grid)
         return sums["rms_transmission_angle_error_deg"], ok
 
     (sq, ok), grads = W.over_windows(lambda i: jax.value_and_grad(one, has_aux=True)(params, i), starts)
