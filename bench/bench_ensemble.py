@@ -1,7 +1,7 @@
 """Benchmark: the ensemble kernel against the XLA sweep on the paper Monte Carlo.
 
     python bench/bench_ensemble.py [--device cpu] [--designs 96] [--workers 2] [--threads 2]
-    python bench/bench_ensemble.py --device gpu [--batch-sizes 1024,4096,16384] [--xla-batch 2048]
+    python bench/bench_ensemble.py --device gpu [--batch-sizes 1024,4096,16384] [--xla-batches 512,2048]
 
 The workload is ``bench/bench_sweep.py``'s: a Monte Carlo of the paper design
 (clearances at B and C 0.5 +- 0.05 mm, uniform), each design the paper run (4
@@ -18,10 +18,11 @@ the same designs for both engines, in one run on one machine.
   p > 0.01).
 - ``--device gpu``: the kernel compiled as CUDA (one design per GPU thread) at each
   batch size, end to end (host to host, compilation excluded and reported), and the
-  XLA engine with one ``vmap`` batch of ``--xla-batch`` designs (0 skips it); writes
+  XLA engine with one ``vmap`` batch at each of ``--xla-batches`` (0 skips it); writes
   ``gpu_designs_per_s`` (the best batch size) and the fraction of fp64 peak from an
-  operation count of the generated code. Its entries are merged into the output file,
-  so the CPU numbers stay.
+  operation count of the generated code, and a plot of designs/s against batch size for
+  both engines (``ensemble_gpu.png`` beside the JSON). Its entries are merged into the
+  output file, so the CPU numbers stay.
 
 Writes one JSON file (default ``bench/results/ensemble.json``); nothing is asserted.
 """
@@ -151,14 +152,14 @@ def ks_tests(a, b, sa, sb):
 def _operations(source_text: str, name: str) -> int:
     """Scalar operations of a generated function: its statements (one operation each),
     libm calls counted as 20 (a common cost of a double-precision sin, pow or atan2)."""
-    body = source_text[source_text.index(f"void {name}(") :]
+    body = source_text[source_text.index(f"KFN void KNAME({name})(") :]
     body = body[: body.index("\n}\n")]
-    statements = body.count("const double v") + body.count("const int v") + body.count("const long v")
-    calls = len(re.findall(r"\b(sin|cos|pow|atan2|exp|sqrt)\(", body))
+    statements = len(re.findall(r"^\s*const (KD|KB|KL) v", body, re.M))
+    calls = len(re.findall(r"\bKF[12]\((sin|cos|pow|atan2|exp|sqrt),", body)) + 2 * body.count("KSINCOS(")
     return statements + 19 * calls
 
 
-def gpu(base, names, xs_all, settings, batch_sizes, xla_batch, peak_tflops):
+def gpu(base, names, xs_all, settings, batch_sizes, xla_batches, peak_tflops):
     import numpy as np
 
     from jaxcrank import sweep
@@ -193,9 +194,9 @@ def gpu(base, names, xs_all, settings, batch_sizes, xla_batch, peak_tflops):
                 fp64_fraction_of_peak=float(ops / wall / (peak_tflops * 1e12)),
             )  # fmt: skip
         )
-    if xla_batch:
+    for xla_batch in [b for b in xla_batches if b > 0]:
         xs = xs_all[:xla_batch]
-        run = lambda: sweep.run(base, names, xs, settings, chunk=xla_batch, progress=False)  # noqa: E731
+        run = lambda xs=xs, b=xla_batch: sweep.run(base, names, xs, settings, chunk=b, progress=False, engine="xla")  # noqa: E731
         start = time.perf_counter()
         run()
         first = time.perf_counter() - start
@@ -207,6 +208,28 @@ def gpu(base, names, xs_all, settings, batch_sizes, xla_batch, peak_tflops):
     return runs
 
 
+def plot_gpu(runs, path):
+    """Designs/s against batch size, one line per engine (log-log), saved to ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name in ("kernel", "xla"):
+        pts = sorted((r["batch"], r["designs_per_s"]) for r in runs if r["engine"] == name)
+        if pts:
+            ax.loglog(*zip(*pts), "o-", label=f"{name} (after compilation)")
+    ax.set_xlabel("batch size, designs")
+    ax.set_ylabel("paper runs per second, 1/s")
+    ax.set_title("ensemble throughput on the GPU")
+    ax.grid(True, which="both", lw=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--device", choices=("cpu", "gpu"), default="cpu")
@@ -215,7 +238,7 @@ def main(argv=None):
     p.add_argument("--threads", type=int, default=None, help="kernel threads (default: usable CPUs)")
     p.add_argument("--revolutions", type=float, default=4.0)
     p.add_argument("--batch-sizes", default="1024,4096,16384", help="GPU kernel batch sizes")
-    p.add_argument("--xla-batch", type=int, default=2048, help="GPU XLA vmap batch (0: skip)")
+    p.add_argument("--xla-batches", default="512,2048", help="GPU XLA vmap batch sizes (0: skip)")
     p.add_argument("--peak-tflops", type=float, default=33.5, help="the GPU's fp64 peak, TFLOP/s (H100 SXM: 33.5)")
     p.add_argument("--out", type=Path, default=RESULTS / "ensemble.json")
     args = p.parse_args(argv)
@@ -247,8 +270,10 @@ def main(argv=None):
                 result[key] = old[key]
     else:
         sizes = [int(s) for s in args.batch_sizes.split(",")]
-        base, names, xs, settings = _setup(args.revolutions, max(sizes + [args.xla_batch]))
-        runs = gpu(base, names, xs, settings, sizes, args.xla_batch, args.peak_tflops)
+        xla_sizes = [int(s) for s in args.xla_batches.split(",")]
+        base, names, xs, settings = _setup(args.revolutions, max(sizes + xla_sizes))
+        runs = gpu(base, names, xs, settings, sizes, xla_sizes, args.peak_tflops)
+        plot_gpu(runs, args.out.with_name(args.out.stem + "_gpu.png"))
         kernel_runs = [r for r in runs if r["engine"] == "kernel"]
         best = max(kernel_runs, key=lambda r: r["designs_per_s"])
         result = json.loads(args.out.read_text()) if args.out.exists() else {}

@@ -32,7 +32,7 @@ for run in range(2):
     res[f"simulate run {run}"] = [digest(sim.ys), digest(np.stack([cols[k] for k in outputs.COLUMNS])),
                                   int(sim.num_steps)]
     tab = sweep.run(jc.paper(), ["clearance_C", "contact.restitution"],
-                    [[2.5e-4, 0.9], [3e-4, 0.7], [4e-4, 1.0]], settings, chunk=2, progress=False)
+                    [[2.5e-4, 0.9], [3e-4, 0.7], [4e-4, 1.0]], settings, chunk=2, progress=False, engine="xla")
     res[f"sweep run {run}"] = [digest(np.stack([tab[k] for k in sweep.METRICS])), list(tab["status"]),
                                digest(tab["steps"])]
 print(json.dumps(res))

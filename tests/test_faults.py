@@ -36,7 +36,7 @@ settings = sweep.Settings(revolutions=0.02, samples_per_revolution=1200, metrics
                           options=jc.DEFAULTS.replace(max_steps=20000))
 names, designs = sampling.latin_hypercube({"clearance_C": (1e-4, 5e-4), "contact.restitution": (0.5, 1.0)}, 14, seed=1)
 sweep.run(jc.paper(), names, designs, settings, out=out, resume=(out / "table.csv").exists(), chunk=1,
-          progress=False)
+          progress=False, engine="xla")
 """
 
 _OPTIMIZE = """
@@ -154,12 +154,12 @@ INVALID = np.array([[9e-3], [1e-2], [2e-2]])  # larger than the 8 mm hole: rows 
 @pytest.fixture
 def table_dir(tmp_path):
     out = tmp_path / "sweep"
-    sweep.run(jc.paper(), NAMES, INVALID, out=out, progress=False)
+    sweep.run(jc.paper(), NAMES, INVALID, out=out, progress=False, engine="xla")
     return out
 
 
 def _resume(out):
-    return sweep.run(jc.paper(), NAMES, INVALID, out=out, resume=True, progress=False)
+    return sweep.run(jc.paper(), NAMES, INVALID, out=out, resume=True, progress=False, engine="xla")
 
 
 def test_resume_of_an_intact_table_solves_nothing(table_dir):

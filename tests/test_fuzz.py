@@ -137,7 +137,9 @@ def sweep_designs(draw):
 @given(sweep_designs())
 def test_sweep_table_rows_are_complete_and_failed_cells_empty(designs):
     with tempfile.TemporaryDirectory() as tmp:
-        tab = sweep.run(jc.paper(), SWEEP_NAMES, designs, SWEEP_SETTINGS, out=tmp, chunk=1, progress=False)
+        tab = sweep.run(
+            jc.paper(), SWEEP_NAMES, designs, SWEEP_SETTINGS, out=tmp, chunk=1, progress=False, engine="xla"
+        )
         with open(Path(tmp) / "table.csv", newline="") as f:
             raw = list(csv.reader(f))
     cols = sweep.columns(SWEEP_NAMES)

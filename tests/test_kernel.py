@@ -281,6 +281,22 @@ def test_kernel_sweep_writes_the_table_and_resumes(tmp_path, monkeypatch):
             np.testing.assert_array_equal(resumed[key], whole[key], err_msg=key)
 
 
+def test_sweep_records_its_engine_and_a_resume_keeps_it(tmp_path):
+    """Without ``engine`` a tsit5 sweep runs on the kernel and records it; resuming with
+    the other engine is refused by name, and resuming without one keeps the kernel."""
+    from jaxcrank.runs import engines
+
+    args = (jc.paper(), SWEEP_NAMES, SWEEP_DESIGNS[:2], SWEEP_SHORT)
+    assert engines.default_engine(SWEEP_SHORT) == "kernel"
+    first = sweep.run(*args, out=tmp_path, chunk=2, progress=False)
+    assert engines.recorded(tmp_path) == "kernel"
+    with pytest.raises(jc.params.ParameterError, match="started with engine 'kernel'"):
+        sweep.run(*args, out=tmp_path, chunk=2, resume=True, progress=False, engine="xla")
+    again = sweep.run(*args, out=tmp_path, chunk=2, resume=True, progress=False)
+    np.testing.assert_array_equal(again["steps"], first["steps"])
+    assert engines.recorded(tmp_path) == "kernel"
+
+
 def test_kernel_sweep_refuses_what_it_cannot_run():
     with pytest.raises(jc.params.ParameterError, match="engine"):
         sweep.run(jc.paper(), SWEEP_NAMES, SWEEP_DESIGNS[:1], SWEEP_SHORT, progress=False, engine="warp")
@@ -315,3 +331,133 @@ def test_kernel_source_compiles_as_cuda(tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "jk_solve_gpu" in ptx.read_text()
+
+
+#: the CUDA built-ins the GPU entry point uses, for a host C++ compiler
+CUDA_ON_HOST = r"""
+#include <math.h>
+#define __device__
+#define __constant__
+#define __global__
+struct jk_dim3 { unsigned x; };
+static jk_dim3 blockIdx, blockDim, threadIdx;
+"""
+#: a launch on the host: every thread of the grid, one after another
+CUDA_ON_HOST_LAUNCH = r"""
+extern "C" int jk_launch(long grid, long block, long n, const double *params, const double *t_end,
+                         const double *t_start, long n_samples, long max_steps, double rtol, double atol, double dt0,
+                         double *y, double *peaks, double *whole, double *sums, long *count, long *accepted,
+                         long *rejected, int *result) {
+  blockDim.x = (unsigned)block;
+  for (long b = 0; b < grid; b++)
+    for (long t = 0; t < block; t++) {
+      blockIdx.x = (unsigned)b;
+      threadIdx.x = (unsigned)t;
+      jk_solve_gpu(n, params, t_end, t_start, n_samples, max_steps, rtol, atol, dt0, y, peaks, whole, sums, count,
+                   accepted, rejected, result);
+    }
+  return 0;
+}
+"""
+
+
+def fake_cupy(tmp_path):
+    """A stand-in for CuPy whose ``RawModule`` compiles the source with the host's C++
+    compiler (the CUDA built-ins stubbed) and whose arrays are NumPy's."""
+    import ctypes
+    import types
+
+    def raw_module(code, options):
+        assert "--fmad=false" in options
+        cpp, so = tmp_path / "kernel.cpp", tmp_path / "kernel_cuda_on_host.so"
+        cpp.write_text("\n".join([CUDA_ON_HOST, code, CUDA_ON_HOST_LAUNCH]))
+        flags = ["-x", "c++", "-D__CUDACC__", "-O2", "-ffp-contract=off", "-fno-math-errno", "-shared", "-fPIC", "-w"]
+        proc = subprocess.run(["g++", *flags, str(cpp), "-o", str(so), "-lm"], capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        lib = ctypes.CDLL(str(so))
+        dp = np.ctypeslib.ndpointer(dtype=np.float64, flags="C_CONTIGUOUS")
+        lp = np.ctypeslib.ndpointer(dtype=np.int64, flags="C_CONTIGUOUS")
+        ip = np.ctypeslib.ndpointer(dtype=np.int32, flags="C_CONTIGUOUS")
+        cl, cd = ctypes.c_long, ctypes.c_double
+        lib.jk_launch.argtypes = [cl, cl, cl, dp, dp, dp, cl, cl, cd, cd, cd, dp, dp, dp, dp, lp, lp, lp, ip]
+
+        def launch(grid, block, args):
+            lib.jk_launch(grid[0], block[0], *args)
+
+        return types.SimpleNamespace(get_function=lambda name: launch if name == "jk_solve_gpu" else None)
+
+    runtime = types.SimpleNamespace(deviceSynchronize=lambda: None, getDeviceCount=lambda: 1)
+    return types.SimpleNamespace(
+        RawModule=raw_module,
+        asarray=lambda a: np.array(a, dtype=np.asarray(a).dtype, order="C", copy=True),
+        zeros=np.zeros,
+        asnumpy=np.asarray,
+        int64=np.int64,
+        int32=np.int32,
+        cuda=types.SimpleNamespace(runtime=runtime),
+    )
+
+
+@pytest.mark.skipif(shutil.which("g++") is None, reason="no C++ compiler")
+def test_gpu_path_on_the_host_equals_the_cpu_kernel(tmp_path, monkeypatch):
+    """``kernel.gpu.solve`` with CuPy stood in for by the host (the source under
+    ``__CUDACC__``: ``__device__`` functions, ``__constant__`` tables, the ``__global__``
+    entry point, compiled by the host's C++ compiler with the CUDA built-ins stubbed; a
+    grid of 2 blocks of 3 threads for 4 designs, so two threads fall off the end) gives
+    the CPU kernel's statuses, steps, metrics and end states bit for bit, for designs
+    that finish and one that runs out of steps. Same arithmetic with FMA contraction
+    off, as ``gpu.OPTIONS`` asks of NVRTC; on a GPU only libm's last bits may differ."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "cupy", fake_cupy(tmp_path))
+    gpu._function.cache_clear()
+    try:
+        xs = SWEEP_DESIGNS[[0, 1, 2, 4]]  # the second runs out of steps
+        on_gpu = gpu.solve(jc.paper(), SWEEP_NAMES, xs, SWEEP_SHORT, block=3)
+    finally:
+        gpu._function.cache_clear()
+    cpu = engine.solve(jc.paper(), SWEEP_NAMES, xs, SWEEP_SHORT, vector=False)
+    assert list(cpu.status) == [engine.OK, engine.MAX_STEPS, engine.OK, engine.OK]
+    for field in engine.Batch._fields:
+        np.testing.assert_array_equal(getattr(on_gpu, field), getattr(cpu, field), err_msg=field)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("g++") is None, reason="no C++ compiler")
+def test_gpu_bench_runs_with_the_host_standing_in(tmp_path, monkeypatch):
+    """``python bench/bench_ensemble.py --device gpu`` end to end, CuPy stood in for by
+    the host (as above) and JAX on the CPU, at tiny sizes: it writes the GPU keys and
+    the designs/s plot."""
+    import json
+    import sys
+    from pathlib import Path
+
+    bench = Path(__file__).resolve().parents[1] / "bench"
+    monkeypatch.syspath_prepend(str(bench))
+    monkeypatch.setitem(sys.modules, "cupy", fake_cupy(tmp_path))
+    gpu._function.cache_clear()
+    import bench_ensemble
+
+    out = tmp_path / "ensemble.json"
+    try:
+        bench_ensemble.main(
+            [
+                "--device",
+                "gpu",
+                "--batch-sizes",
+                "3,6",
+                "--xla-batches",
+                "2",
+                "--revolutions",
+                "0.05",
+                "--out",
+                str(out),
+            ]
+        )
+    finally:
+        gpu._function.cache_clear()
+    result = json.loads(out.read_text())
+    assert result["gpu_best_batch"] in (3, 6) and result["gpu_designs_per_s"] > 0
+    assert 0 < result["gpu_fp64_fraction_of_peak"] < 1
+    assert {r["engine"] for r in result["gpu_runs"]} == {"kernel", "xla"}
+    assert (tmp_path / "ensemble_gpu.png").stat().st_size > 0

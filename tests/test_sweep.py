@@ -31,7 +31,7 @@ DESIGNS = np.array([[2.5e-4, 1e-5], [2.5e-4, 1e-10], [3e-4, 1e-5], [9e-3, 1e-5],
 
 @pytest.fixture(scope="module")
 def table():
-    return sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=2, progress=False)
+    return sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=2, progress=False, engine="xla")
 
 
 def test_vmap_equals_python_loop_before_impacts():
@@ -39,7 +39,7 @@ def test_vmap_equals_python_loop_before_impacts():
     equals a Python loop of the public API (simulate -> trajectory -> metrics) to
     1e-9 relative."""
     first_ms = sweep.Settings(revolutions=0.01, samples_per_revolution=1200, metrics_from_revolution=0.0)
-    tab = sweep.run(jc.paper(), NAMES, DESIGNS[[0, 2, 4]], first_ms, chunk=4, progress=False)
+    tab = sweep.run(jc.paper(), NAMES, DESIGNS[[0, 2, 4]], first_ms, chunk=4, progress=False, engine="xla")
     for row, i in enumerate((0, 2, 4)):
         mech = jc.paper()
         for n, v in zip(NAMES, DESIGNS[i]):
@@ -61,7 +61,7 @@ def test_vmap_equals_python_loop_through_impacts(table):
     uses the same compiled batch shape: an unbatched compile rounds differently in
     the last bit, and impact chaos amplifies that to 1e-5..1e-3 relative in 3 ms.)"""
     for i in range(len(DESIGNS)):
-        one = sweep.run(jc.paper(), NAMES, DESIGNS[i : i + 1], SHORT, chunk=2, progress=False)
+        one = sweep.run(jc.paper(), NAMES, DESIGNS[i : i + 1], SHORT, chunk=2, progress=False, engine="xla")
         assert one["status"][0] == table["status"][i]
         for k in list(metrics.METRICS) + ["steps"]:
             np.testing.assert_array_equal(one[k][0], table[k][i], err_msg=k)
@@ -71,7 +71,7 @@ def test_batch_size_does_not_change_a_design(table):
     """Batches of 2 and 3 designs give the same numbers for every design, wherever it
     sits in its batch (no FMA contraction, jaxcrank.numerics.runtime: with it the same design
     rounded differently per lane and per batch size)."""
-    three = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=3, progress=False)
+    three = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=3, progress=False, engine="xla")
     assert list(three["status"]) == list(table["status"])
     for k in list(metrics.METRICS) + ["steps"]:
         np.testing.assert_array_equal(three[k], table[k], err_msg=k)
@@ -81,7 +81,7 @@ def test_batch_size_does_not_change_a_design(table):
 def test_workers_give_the_single_process_table():
     """Two local worker processes, each design solved alone (one per chunk), give the
     table of one process exactly, failures and invalid designs included."""
-    alone = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, progress=False)
+    alone = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, progress=False, engine="xla")
     pooled = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, workers=2, progress=False)
     assert list(alone["status"]) == list(pooled["status"]) == ["ok", "max_steps", "ok", "invalid", "ok"]
     for k in ["index", "steps"] + list(metrics.METRICS):
@@ -92,7 +92,7 @@ def test_workers_give_the_single_process_table():
 @pytest.mark.parametrize("kwargs, match", [({"chunk": 0}, "chunk"), ({"workers": 0}, "workers")])
 def test_bad_chunk_or_workers_raise(kwargs, match):
     with pytest.raises(ParameterError, match=match):
-        sweep.run(jc.paper(), NAMES, DESIGNS[:1], SHORT, progress=False, **kwargs)
+        sweep.run(jc.paper(), NAMES, DESIGNS[:1], SHORT, progress=False, engine="xla", **kwargs)
 
 
 def test_failures_are_reported_and_the_rest_completes(table):
@@ -118,15 +118,19 @@ def test_killed_sweep_resumes_to_the_same_table(tmp_path, table, monkeypatch):
 
     monkeypatch.setattr(sweep, "_evaluate", dies_after_first_batch)
     with pytest.raises(KeyboardInterrupt):
-        sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, progress=False)
+        sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, progress=False, engine="xla")
     partial = sweep.read_table(tmp_path / "table.csv")
     assert sorted(partial["index"]) == [0, 1, 3]  # first batch + the invalid design
     with pytest.raises(ParameterError, match="resume"):
-        sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, progress=False)
+        sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, progress=False, engine="xla")
     with pytest.raises(ParameterError, match="other designs"):
-        sweep.run(jc.paper(), NAMES, DESIGNS[:4], SHORT, out=tmp_path, chunk=2, resume=True, progress=False)
+        sweep.run(
+            jc.paper(), NAMES, DESIGNS[:4], SHORT, out=tmp_path, chunk=2, resume=True, progress=False, engine="xla"
+        )
     monkeypatch.setattr(sweep, "_evaluate", real)
-    resumed = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, resume=True, progress=False)
+    resumed = sweep.run(
+        jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, resume=True, progress=False, engine="xla"
+    )
     assert list(resumed["status"]) == list(table["status"])
     for k in list(metrics.METRICS) + ["steps"]:
         np.testing.assert_array_equal(resumed[k], table[k], err_msg=k)
@@ -138,7 +142,7 @@ import jaxcrank as jc
 from jaxcrank import metrics, sweep
 sys.path.insert(0, {tests!r})
 from test_sweep import NAMES, DESIGNS, SHORT
-tab = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=8, progress=False)  # 2 per device
+tab = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=8, progress=False, engine="xla")  # 2 per device
 print(json.dumps({{"devices": jax.device_count(), "status": list(tab["status"]),
                   **{{k: [None if np.isnan(v) else v for v in tab[k]] for k in metrics.METRICS}}}}))
 """
@@ -174,7 +178,7 @@ from jaxcrank import sampling, sweep
 sys.path.insert(0, {tests!r})
 from test_sweep import NAMES, SHORT, TOLERANCES
 names, x = sampling.monte_carlo(TOLERANCES, 6, seed=0)
-tab = sweep.run(jc.paper(), names, x, SHORT, chunk=4, progress=False)
+tab = sweep.run(jc.paper(), names, x, SHORT, chunk=4, progress=False, engine="xla")
 ok = tab["status"] == "ok"
 print(json.dumps({{"processes": jax.process_count(), "devices": jax.device_count(), "ok": int(ok.sum()),
                   "mean": float(np.mean(tab["rms_transmission_angle_error_deg"][ok]))}}))
@@ -213,7 +217,7 @@ def test_two_processes_with_jax_distributed_give_the_one_process_monte_carlo_mea
         assert p.returncode == 0, err[-2000:]
     got = [json.loads([ln for ln in o.splitlines() if ln.startswith("{")][-1]) for o, _ in outs]
     names, x = sampling.monte_carlo(TOLERANCES, 6, seed=0)
-    one = sweep.run(jc.paper(), names, x, SHORT, chunk=4, progress=False)
+    one = sweep.run(jc.paper(), names, x, SHORT, chunk=4, progress=False, engine="xla")
     ok = one["status"] == "ok"
     mean = float(np.mean(one["rms_transmission_angle_error_deg"][ok]))
     for g in got:

@@ -6,10 +6,15 @@
   one compiled C function, one design per CPU thread: the same model (generated from
   it), solver, controller and metrics, for throughput. Needs a C compiler.
 
-[`default_engine`][jaxcrank.runs.engines.default_engine] is the kernel where it can run the sweep, else XLA.
+[`default_engine`][jaxcrank.runs.engines.default_engine] is the kernel where it can run the sweep, else XLA. A sweep
+with an output directory records its engine there (``engine.txt``) and a resumed sweep keeps it:
+the two engines round differently, which impact chaos amplifies, so a table is never a mix
+([`resolve`][jaxcrank.runs.engines.resolve]).
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -30,6 +35,36 @@ def default_engine(settings=None, workers: int = 1, distributed: bool = False) -
     process: no ``workers`` and no ``jax.distributed`` job), else ``"xla"``."""
     fits = (settings is None or settings.options.solver_name == "tsit5") and int(workers) == 1 and not distributed
     return "kernel" if fits and kernel_available() else "xla"
+
+
+#: the file in a sweep's output directory that names the engine its table was made with
+ENGINE_FILE = "engine.txt"
+
+
+def recorded(out) -> str | None:
+    """The engine recorded in the sweep directory ``out`` (None when there is none)."""
+    path = Path(out) / ENGINE_FILE
+    return path.read_text().strip() if path.exists() else None
+
+
+def resolve(
+    engine: str | None, settings=None, workers: int = 1, distributed: bool = False, out=None, resume: bool = False
+) -> str:
+    """The engine a sweep runs with: ``engine`` when given, else, resuming the sweep in
+    ``out``, the engine it was started with, else [`default_engine`][jaxcrank.runs.engines.default_engine].
+
+    Raises:
+        ParameterError: resuming a sweep that was started with another engine than ``engine``.
+    """
+    before = recorded(out) if (out is not None and resume) else None
+    if engine is None:
+        return before or default_engine(settings, workers, distributed)
+    if before is not None and engine != before:
+        raise ParameterError(
+            f"engine = {engine!r}: the sweep in {out} was started with engine {before!r} (its {ENGINE_FILE}); "
+            f"resume it with engine = {before!r} (--engine {before}), or start a new sweep in another directory"
+        )
+    return engine
 
 
 def default_chunk() -> int:

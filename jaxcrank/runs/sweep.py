@@ -114,7 +114,7 @@ def run(
     chunk: int | None = None,
     workers: int = 1,
     progress: bool = True,
-    engine: str = "xla",
+    engine: str | None = None,
 ) -> dict[str, Shaped[np.ndarray, " designs"]]:
     """Simulate every design and return the table (as [`read_table`][jaxcrank.runs.sweep_table.read_table]).
 
@@ -138,12 +138,21 @@ def run(
             per-trajectory C kernel of [`jaxcrank.numerics.kernel`][]: tsit5 only, one
             design per CPU thread, ``workers`` must be 1; ``chunk`` is then the designs per
             kernel call and checkpoint, default [`jaxcrank.runs.engines.default_chunk`][]).
-            Same table, statuses and resume; a resumed sweep keeps its engine (the two
-            round differently, which impact chaos amplifies).
+            Same table, statuses and resume. Default ``None``: the kernel where it can run
+            the sweep, else xla ([`jaxcrank.runs.engines.default_engine`][]); resuming, the
+            engine the sweep was started with, which ``out`` records (the two round
+            differently, which impact chaos amplifies).
+
+    Raises:
+        ParameterError: bad designs shape, an existing sweep in ``out`` without
+            ``resume``, a resumed sweep over other designs or with another engine, or an
+            engine that cannot run these settings ([`jaxcrank.runs.engines.check`][]).
+        CorruptFileError: a resumed sweep's files cannot be read.
     """
     from . import engines
 
     settings = SweepSettings() if settings is None else settings
+    engine = engines.resolve(engine, settings, workers, jax.process_count() > 1, out, resume)
     engines.check(engine, settings, workers)
     names = list(names)
     designs = np.atleast_2d(np.asarray(designs, dtype=float))
@@ -176,6 +185,7 @@ def run(
         if writer:
             out.mkdir(parents=True, exist_ok=True)
             atomic_write(out / "designs.npy", lambda f: np.save(f, designs))
+            atomic_write(out / engines.ENGINE_FILE, lambda f: f.write(engine.encode()))
             if not path.exists():
                 atomic_write(path, lambda f: f.write(csv_text([cols]).encode()))
     rows: list[list] = []
