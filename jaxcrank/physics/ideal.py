@@ -17,6 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ..numerics import linalg
+from .laws import safe_norm
 from .params import Mechanism
 
 
@@ -151,3 +152,45 @@ def driving_moment(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]
     residual = mass_matrix(mech) * qdd - rod_gravity(mech)
     f_b, _ = reactions(mech, q, residual, True, True)
     return driving_moment_from_pin_force(mech, t, f_b, crank_pin(mech, t))
+
+
+def joint_reactions(mech: Mechanism, t: Float[ArrayLike, ""]) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
+    """Forces on the rod from the crank pin B and the slider pin C of the ideal
+    mechanism at time t, by inverse dynamics: ``(F_B, F_C)``, N (both joints ideal,
+    whatever ``mech``'s joints are)."""
+    q, _, qdd = kinematics(mech, t)
+    residual = mass_matrix(mech) * qdd - rod_gravity(mech)
+    return reactions(mech, q, residual, True, True)
+
+
+def contact_margin(mech: Mechanism, samples: int = 360, softness: float = 0.005) -> Float[Array, ""]:
+    """How far the ideal mechanism's joint loads stay from zero over one revolution:
+    ``min_j softmin_t |F_j(t)| / rms_t |F_j(t)|`` over the joints j = B, C
+    ([`joint_reactions`][jaxcrank.physics.ideal.joint_reactions]), dimensionless, in [0, 1].
+
+    A pin in a clearance joint stays pressed against its bearing while the load through
+    the joint keeps its magnitude; where |F_j| passes near zero the load reverses and the
+    pin crosses the clearance, the contact-loss that starts impacts. 0: some load
+    reverses through zero; near 1: both loads are nearly constant in magnitude.
+
+    Args:
+        mech: the mechanism (its clearances, laws and friction are not used).
+        samples: equally spaced times over one crank period (>= 8).
+        softness: width of the soft minimum over the samples,
+            ``-s ln mean exp(-x / s)`` with s = ``softness`` (> 0; it exceeds the sampled minimum by at most s ln
+            ``samples`` of the sampled minimum): smooth in the design, so it can be
+            differentiated.
+
+    Raises:
+        ValueError: ``samples < 8`` or ``softness <= 0``.
+    """
+    if int(samples) < 8 or not softness > 0:
+        raise ValueError(f"samples = {samples} must be >= 8 and softness = {softness} > 0")
+    ts = mech.period * jnp.arange(int(samples), dtype=float) / int(samples)
+    f_b, f_c = jax.vmap(lambda t: joint_reactions(mech, t))(ts)
+    margins = []
+    for f in (f_b, f_c):
+        size = safe_norm(f)
+        x = size / jnp.sqrt(jnp.mean(size**2))
+        margins.append(-softness * jax.scipy.special.logsumexp(-x / softness, b=1.0 / x.shape[0]))
+    return jnp.minimum(*margins)
