@@ -35,46 +35,10 @@ from _common import machine
 import jaxcrank as jc
 from jaxcrank.numerics.steady import carry_state, steady_value_and_grad
 from optim.design import design_problem
+from optim.presets import ADAM_RUNS_SI
 
 KEY = "rms_transmission_angle_error_deg"
 ROOT = Path(__file__).resolve().parent
-
-
-EARLIER_ADAM_RUNS_SI = (
-    [
-        0.44,
-        0.6981317007977318,
-        0.0002463181816534627,
-        0.00028640401237716974,
-        1.0,
-        0.057529002886706475,
-        1.0,
-        0.15,
-        1e11,
-    ],
-    [
-        0.44,
-        0.6981317007977318,
-        0.0002389972117927395,
-        0.00026944582032075115,
-        1.0,
-        0.053166234876019486,
-        1.0,
-        0.15,
-        2.1e11,
-    ],
-    [
-        0.3973044990972775,
-        0.9934458521962443,
-        0.000256183637493091,
-        0.00027235670697709624,
-        1.6340041244359393,
-        0.08041450740284659,
-        1.0,
-        0.10443039777904214,
-        158357758934.72577,
-    ],
-)
 
 
 def designs():
@@ -82,7 +46,7 @@ def designs():
     study = json.loads((ROOT / "results" / "design_study.json").read_text())
     out = {"cma_best": study["optimum"]["cma_design_SI"], "adam_best": study["optimum"]["adam_design_SI"]}
     # projected-Adam runs of the nine-variable problem on the earlier start-up-window objective
-    for seed, x in enumerate(EARLIER_ADAM_RUNS_SI):
+    for seed, x in enumerate(ADAM_RUNS_SI):
         out[f"ours_seed{seed}"] = x
     for label, unit in (("cma_best_slider_mass_mid_box", 0.5), ("cma_best_slider_mass_upper", 1.0)):
         x = list(out["cma_best"])

@@ -15,6 +15,7 @@ import jaxcrank as jc
 from jaxcrank.numerics import shooting
 from jaxcrank.numerics.steady import RESULTS, SteadyStateError, carry_state, steady_state, steady_value_and_grad
 from jaxcrank.physics import model
+from optim.presets import ADAM_RUNS_SI as ADAM_RUNS
 
 ROOT = Path(__file__).resolve().parent.parent
 KEY = "rms_transmission_angle_error_deg"
@@ -203,46 +204,8 @@ def _check_gradient(u0, h=1e-3):
     assert np.linalg.norm(grad - fd) <= 0.02 * norm
 
 
-#: final designs (SI) of two projected-Adam runs of the nine-variable problem on the
-#: earlier start-up-window objective (seeds 0 and 1 of that head-to-head); both periodic
-ADAM_RUNS_SI = (
-    [
-        0.44,
-        0.6981317007977318,
-        0.0002463181816534627,
-        0.00028640401237716974,
-        1.0,
-        0.057529002886706475,
-        1.0,
-        0.15,
-        1e11,
-    ],
-    [
-        0.44,
-        0.6981317007977318,
-        0.0002389972117927395,
-        0.00026944582032075115,
-        1.0,
-        0.053166234876019486,
-        1.0,
-        0.15,
-        2.1e11,
-    ],
-)
-
-
-#: the third such run (seed 2): an orbit of period 3 revolutions
-PERIOD_THREE_SI = [
-    0.3973044990972775,
-    0.9934458521962443,
-    0.000256183637493091,
-    0.00027235670697709624,
-    1.6340041244359393,
-    0.08041450740284659,
-    1.0,
-    0.10443039777904214,
-    158357758934.72577,
-]
+#: two projected-Adam designs (period 1) and a third one (period 3)
+ADAM_RUNS_SI, PERIOD_THREE_SI = ADAM_RUNS[:2], ADAM_RUNS[2]
 
 
 def _periodic_designs():
