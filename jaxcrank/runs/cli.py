@@ -29,31 +29,15 @@ COMMANDS = {
 def _simulate_parser(p):
     """Add ``simulate``'s options to its parser ``p``."""
     from ..numerics.solve import DEFAULTS, SOLVERS
+    from . import config
 
     p.description = (
         "Simulate the offset slider-crank with clearance joints (paper defaults unless "
         "--config/--design/--set say otherwise) and write trajectory.csv, config.toml, "
         "summary.json and figures/ into --out."
     )
-    base = p.add_mutually_exclusive_group()
-    base.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
-    base.add_argument(
-        "--design",
-        type=Path,
-        metavar="RESULT_JSON",
-        help="simulate the final design of a `jaxcrank optimize` run, e.g. --design runs/optimize/result.json",
-    )
+    config.add_mechanism_arguments(p, "simulate")
     p.add_argument("--out", type=Path, default=Path("runs/paper"), help="run directory (default: runs/paper)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a parameter (SI), as the library names it, e.g. --set rod_length=0.41 "
-        "--set clearance_B=2e-4 --set contact.law=flores (repeatable)",
-    )
-    p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
     p.add_argument("--t1", type=float, default=0.4, help="simulated time, s (default 0.4 = 4 revolutions at 600 rpm)")
     p.add_argument(
         "--samples-per-degree", type=float, default=10.0, help="output samples per degree of crank angle (default 10)"
@@ -92,17 +76,10 @@ def run_simulate(args) -> int:
 
     from ..analysis import outputs
     from ..numerics import solve
-    from ..physics.params import ParameterError, paper
+    from ..physics.params import ParameterError
     from . import config, plots
 
-    if args.design:
-        mech = config.load_design(args.design)
-    else:
-        mech = config.load(args.config) if args.config else paper()
-    overrides = list(args.overrides)
-    if args.rpm is not None:
-        overrides.append(f"crank_speed={2.0 * math.pi * args.rpm / 60.0!r}")
-    mech = config.apply_overrides(mech, overrides)
+    mech = config.mechanism_from_arguments(args)
     if args.t1 <= 0:
         raise ParameterError(f"--t1 = {args.t1:g} s must be positive")
     degrees = math.degrees(float(mech.crank_speed) * args.t1)

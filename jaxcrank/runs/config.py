@@ -227,3 +227,49 @@ def apply_overrides(mech: Mechanism, overrides: list[str]) -> Mechanism:
         else:
             raise ParameterError(f"override key {'.'.join(path)!r} is too deep; use table.key=value")
     return from_dict(data, base=mech)
+
+
+def add_mechanism_arguments(p, command: str) -> None:
+    """Add the options that choose the mechanism a command runs on to the argparse parser
+    ``p``: ``--config FILE`` or ``--design RESULT_JSON``, ``--set KEY=VALUE`` (repeatable)
+    and ``--rpm``; ``command`` names the command in their help.
+    [`mechanism_from_arguments`][jaxcrank.runs.config.mechanism_from_arguments] reads them back."""
+    base = p.add_mutually_exclusive_group()
+    base.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
+    base.add_argument(
+        "--design",
+        type=Path,
+        metavar="RESULT_JSON",
+        help=f"{command} the final design of a `jaxcrank optimize` run, e.g. --design runs/optimize/result.json",
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a parameter (SI), as the library names it, e.g. --set rod_length=0.41 "
+        "--set clearance_B=2e-4 --set contact.law=flores (repeatable)",
+    )
+    p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
+
+
+def mechanism_from_arguments(args) -> Mechanism:
+    """The mechanism of [`add_mechanism_arguments`][jaxcrank.runs.config.add_mechanism_arguments]' options: the
+    paper's unless ``--config`` or ``--design`` says otherwise, then ``--set`` and ``--rpm``.
+
+    Raises:
+        ParameterError: a bad file, override or value (the message names it).
+    """
+    import math
+
+    from ..physics.params import paper
+
+    if args.design:
+        mech = load_design(args.design)
+    else:
+        mech = load(args.config) if args.config else paper()
+    overrides = list(args.overrides)
+    if args.rpm is not None:
+        overrides.append(f"crank_speed={2.0 * math.pi * args.rpm / 60.0!r}")
+    return apply_overrides(mech, overrides)

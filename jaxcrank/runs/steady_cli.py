@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import time
 from pathlib import Path
 
 from ..numerics.shooting import STEADY_DEFAULTS
 from ..numerics.solve import SOLVERS, solver_from_name
-from ..physics.params import ParameterError, paper
+from ..physics.params import ParameterError
 from . import config
 
 
@@ -23,17 +22,8 @@ def add_arguments(p):
         "Writes summary.json (regime, period_revolutions, floquet_multipliers, the steady-state metrics), "
         "orbit.csv (one period), config.toml, figures/ and poincare_section.png into --out."
     )
-    p.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
+    config.add_mechanism_arguments(p, "find the steady state of")
     p.add_argument("--out", type=Path, default=Path("runs/steady"), help="run directory (default: runs/steady)")
-    p.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a parameter, e.g. --set slider_mass=2.0 (repeatable)",
-    )
-    p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
     p.add_argument("--settle-revolutions", type=int, default=20, help="revolutions from rest before shooting (20)")
     p.add_argument("--max-period", type=int, default=4, help="longest period looked for, revolutions (4)")
     p.add_argument("--newton-tol", type=float, default=1e-7, help="shooting tolerance, scaled units (1e-7)")
@@ -151,11 +141,7 @@ def run(args) -> int:
     from ..numerics.steady import steady_state
     from . import plots
 
-    mech = config.load(args.config) if args.config else paper()
-    overrides = list(args.overrides)
-    if args.rpm is not None:
-        overrides.append(f"crank_speed={2.0 * math.pi * args.rpm / 60.0!r}")
-    mech = config.apply_overrides(mech, overrides)
+    mech = config.mechanism_from_arguments(args)
     if not (args.newton_tol > 0):
         raise ParameterError(f"--newton-tol = {args.newton_tol:g} must be > 0")
     out = args.out
