@@ -45,3 +45,29 @@ def test_clearance_in_a_toml_file(tmp_path):
 def test_bad_clearances_are_named(overrides, needle):
     with pytest.raises(ParameterError, match=needle):
         config.apply_overrides(jc.paper(), overrides)
+
+
+def test_simulate_and_steady_read_the_same_mechanism_options(tmp_path):
+    """``--design`` (an optimiser's result.json), then ``--set`` and ``--rpm`` on top, the
+    same for ``jaxcrank simulate`` and ``jaxcrank steady``; --config and --design exclude
+    each other."""
+    import argparse
+    import json
+    import math
+
+    from jaxcrank.runs import steady_cli
+
+    design = set_parameter(jc.paper(), "rod_mass", 1.7)
+    result = tmp_path / "result.json"
+    result.write_text(json.dumps({"final_mechanism": config.to_dict(design)}))
+    argv = ["--design", str(result), "--set", "slider_mass=0.9", "--rpm", "300"]
+    parsers = [argparse.ArgumentParser(), argparse.ArgumentParser()]
+    config.add_mechanism_arguments(parsers[0], "simulate")
+    steady_cli.add_arguments(parsers[1])
+    for p in parsers:
+        mech = config.mechanism_from_arguments(p.parse_args(argv))
+        assert float(get_parameter(mech, "rod_mass")) == 1.7
+        assert float(get_parameter(mech, "slider_mass")) == 0.9
+        assert math.isclose(float(mech.crank_speed), 10.0 * math.pi, rel_tol=1e-15)
+        with pytest.raises(SystemExit):
+            p.parse_args(["--design", str(result), "--config", str(result)])
