@@ -46,7 +46,7 @@ contact) classify alike in both.
 
 **Defaults** are ``steady_state``'s: 20 settle revolutions, ``max_period = 4``,
 ``recurrence_tol = 1e-3`` (scaled units: clearances and clearance x crank speed) and
-[`STEADY_DEFAULTS`][jaxcrank.numerics.shooting.STEADY_DEFAULTS] (tsit5, rtol = atol =
+`jaxcrank.numerics.shooting.STEADY_DEFAULTS` (tsit5, rtol = atol =
 1e-10, ``max_steps`` = 2,000,000 for the whole settle of a design), so both see the
 same sections up to the solve's noise. The kernel solves with tsit5 only, which is
 ``steady_state``'s default solver too.
@@ -235,7 +235,7 @@ def classify(
         max_period: the longest period looked for, revolutions, >= 1 (periods up to
             min(max_period, settle_revolutions) are tested, as ``steady_state`` does).
         recurrence_tol: recurrence tolerance, scaled units, > 0 (default 1e-3).
-        options: solve settings (default [`STEADY_DEFAULTS`][jaxcrank.numerics.shooting.STEADY_DEFAULTS];
+        options: solve settings (default `jaxcrank.numerics.shooting.STEADY_DEFAULTS`;
             ``max_steps`` is the step budget of a design's whole settle).
         engine: ``"auto"``, ``"kernel"`` (tsit5 only) or ``"xla"``.
         out: directory for ``table.csv`` and ``designs.npy``, appended after every chunk.

@@ -84,9 +84,10 @@ def load(path):
 
 
 def regime_map(table, names, path: Path) -> Path:
-    """A two-parameter grid's regime map: each design a cell coloured by its period in
-    revolutions (periodic), grey (not periodic) or marked with a red cross (failed or
-    invalid); parameters in SI with their units on the axes."""
+    """A two-parameter grid's regime map: one cell per design, coloured by its period in
+    crank revolutions (periodic), grey (not periodic) or white with a red cross (failed or
+    invalid), the period written in the cell; the grid's levels (SI, units on the axes)
+    label the cells, so uneven or logarithmic levels stay readable."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -98,24 +99,27 @@ def regime_map(table, names, path: Path) -> Path:
     cols = [f"{n}_{parameter_unit(n)}" for n in names]
     a, b = (np.asarray(table[c]) for c in cols)
     ua, ub = np.unique(a), np.unique(b)
+    ia, ib = np.searchsorted(ua, a), np.searchsorted(ub, b)
     regime = np.asarray(table["regime"])
     code = np.where(regime == "periodic", np.asarray(table["period_revolutions"]), np.where(regime == "", np.nan, 0.0))
     k_max = int(np.nanmax(code, initial=0.0))
     z = np.full((len(ua), len(ub)), np.nan)
-    z[np.searchsorted(ua, a), np.searchsorted(ub, b)] = code
-    colours = ["0.75"] + [plt.get_cmap("viridis")(i / max(k_max - 1, 1)) for i in range(k_max)]
+    z[ia, ib] = code
+    colours = ["0.75"] + [plt.get_cmap("viridis")(0.35 + 0.6 * i / max(k_max - 1, 1)) for i in range(k_max)]
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
-    im = ax.pcolormesh(ub, ua, z, shading="nearest", cmap=ListedColormap(colours), vmin=-0.5, vmax=k_max + 0.5)
+    im = ax.pcolormesh(np.arange(len(ub)), np.arange(len(ua)), z, shading="nearest", cmap=ListedColormap(colours),
+                       vmin=-0.5, vmax=k_max + 0.5)  # fmt: skip
     bar = fig.colorbar(im, ax=ax, ticks=range(k_max + 1))
     bar.ax.set_yticklabels(["not periodic"] + [f"period {k}" for k in range(1, k_max + 1)])
     bar.set_label("steady-state regime (period in crank revolutions)")
-    failed = np.isnan(code)
-    if failed.any():
-        ax.plot(b[failed], a[failed], "rx", ms=9, label="failed / invalid")
-        ax.legend(fontsize=8)
+    for i, j, k in zip(ia, ib, code):
+        ax.text(j, i, "x" if np.isnan(k) else ("-" if k == 0 else str(int(k))), ha="center", va="center",
+                color="red" if np.isnan(k) else "black", fontsize=9)  # fmt: skip
+    ax.set_xticks(np.arange(len(ub)), [f"{v:.4g}" for v in ub], rotation=45 if len(ub) > 6 else 0)
+    ax.set_yticks(np.arange(len(ua)), [f"{v:.4g}" for v in ua])
     ax.set_xlabel(f"{names[1]} ({parameter_unit(names[1])})")
     ax.set_ylabel(f"{names[0]} ({parameter_unit(names[0])})")
-    ax.set_title("Regime map: Poincare-section recurrence after the settle")
+    ax.set_title("Regime map (x: failed or invalid)" if np.isnan(code).any() else "Regime map")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
