@@ -17,6 +17,7 @@ import pytest
 
 import jaxcrank as jc
 from jaxcrank.numerics import shooting
+from jaxcrank.physics import model
 from jaxcrank.physics.params import get_parameter
 from jaxcrank.runs import regimes
 
@@ -106,6 +107,12 @@ def test_kernel_continuation_equals_a_longer_run(periodic):
     assert np.max(np.abs(more.y[0, :m] - two.y[0, :m])) <= 1e-6
     np.testing.assert_allclose(more.y[0, m:], two.y[0, m:], rtol=1e-7)  # works (J, scaled)
     assert np.all(more.y[0, m:] > 1.5 * one.y[0, m:])  # they accumulated over both revolutions
+    # the fact behind it: the field is periodic in t with the crank period (the crank
+    # angle is not a state entry), here at section states and mid-revolution
+    for y, t in ((one.y[0], 0.0), (more.y[0], 0.0), (one.y[0], 0.37 * T)):
+        f0 = np.asarray(model.vector_field(t, jnp.asarray(y), periodic))
+        f1 = np.asarray(model.vector_field(t + T, jnp.asarray(y), periodic))
+        np.testing.assert_allclose(f1, f0, rtol=1e-9, atol=1e-9 * np.max(np.abs(f0)))
 
 
 @kernel_only
