@@ -9,7 +9,7 @@ read the metric definitions of ``analysis.metrics``, which need the physics alon
 - ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
   ``analysis.validation`` (``wall_impact``, ``memory_audit``);
 - ``jaxcrank.runs``: ``sweep``, ``engines``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``,
-  ``steady_cli``.
+  ``steady_cli``, ``regimes``, ``regimes_cli``.
 
 Importing jaxcrank turns on float64 and adds two XLA CPU options to ``XLA_FLAGS``
 ([`jaxcrank.numerics.runtime`][]): a documented, process-wide decision; what it changes

@@ -135,6 +135,31 @@ def revolution_with_tangent(mech, z, v, options, samples):
     return out, tangent, metrics_, result
 
 
+def recurrence(section, m: int, max_period: int, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The period test on Poincare-section points: the smallest k <= ``max_period`` with
+    ``max |y_N - y_{N-k}| <= tol`` over the first ``m`` (dynamic) entries, y_N the last point.
+
+    Args:
+        section: scaled section points, shape (..., N + 1, state) (leading axes: designs).
+        m: the dynamic entries compared (the state before the works, ``dynamic_size``).
+        max_period: the longest period looked for, revolutions (k <= min(max_period, N)).
+        tol: recurrence tolerance, scaled units (clearances).
+
+    Returns:
+        ``(period, distances)``: the smallest such k (0: none; NaN distances never
+        recur), shape (...); and ``max |y_N - y_{N-k}|`` for k = 1 .. min(max_period, N),
+        shape (..., K), scaled units.
+    """
+    pts = np.asarray(section, dtype=float)[..., :m]
+    ks = range(1, min(int(max_period), pts.shape[-2] - 1) + 1)
+    last = pts[..., -1, :]
+    gaps = [np.max(np.abs(last - pts[..., -1 - k, :]), axis=-1) for k in ks]
+    distances = np.stack(gaps, axis=-1) if gaps else np.zeros(last.shape[:-1] + (0,))
+    hit = distances <= tol
+    period = np.where(hit.any(axis=-1), np.argmax(hit, axis=-1) + 1, 0)
+    return period, distances
+
+
 def failure(result):
     if result == diffrax.RESULTS.max_steps_reached:
         return RESULTS.settle_max_steps

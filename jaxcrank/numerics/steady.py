@@ -9,7 +9,7 @@ revolution is a map ``Phi: y(nT) -> y((n + 1) T)`` of the scaled state
 1. **settles**: simulates ``settle_revolutions`` revolutions from pins-centred rest
    (or from ``warm_start``) and keeps the section points;
 2. **detects a period**: the smallest k <= ``max_period`` whose section points recur,
-   ``max |y_N - y_{N-k}| <= recurrence_tol``;
+   ``max |y_N - y_{N-k}| <= recurrence_tol`` ([`recurrence`][jaxcrank.numerics.shooting.recurrence]);
 3. **shoots**: Newton's method on ``Phi^k(y) = y``, with the monodromy matrix
    ``M = dPhi^k/dy`` from forward-mode autodiff through the solve
    (``diffrax.ForwardMode``), until ``max |Phi^k(y) - y| <= newton_tol``;
@@ -310,9 +310,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
     if warm_k:
         candidates = [warm_k]
     else:
-        distances = {
-            k: float(jnp.max(jnp.abs(z_end - section[-1 - k, :m]))) for k in range(1, min(max_period, n_settle) + 1)
-        }
+        distances = dict(enumerate(shooting.recurrence(section, m, max_period, recurrence_tol)[1].tolist(), start=1))
         candidates = [k for k, d in distances.items() if d <= recurrence_tol]
     # a slowly settling orbit: shoot the closest recurrence; failing there means not periodic
     near = not candidates and bool(distances) and min(distances.values()) <= 100 * recurrence_tol

@@ -1,6 +1,7 @@
 """Command line: ``jaxcrank simulate [--config FILE | --design RESULT_JSON] [--out DIR]
 [--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]``, ``jaxcrank steady``
-([`jaxcrank.runs.steady_cli`][]) and ``jaxcrank optimize`` ([`optim.cli`][]).
+([`jaxcrank.runs.steady_cli`][]), ``jaxcrank regimes`` ([`jaxcrank.runs.regimes_cli`][]) and
+``jaxcrank optimize`` ([`optim.cli`][]).
 
 A command's options are added, and JAX imported, only once the command is named:
 ``jaxcrank --help`` lists the commands without loading JAX."""
@@ -22,6 +23,7 @@ COMMANDS = {
     "simulate": "simulate the clearance mechanism and write data, summary and figures",
     "sweep": "simulate many designs (grid, LHS, random, one-at-a-time, Monte Carlo), alone or in vmap batches",
     "steady": "find the steady state: periodic orbit and its Floquet multipliers, or chaos and long-run statistics",
+    "regimes": "classify the steady-state regime (periodic and its period, or not) of every design of a sweep spec",
     "optimize": "minimise the RMS transmission-angle error (paper Eq. 19) or a design objective with optax",
 }
 
@@ -334,6 +336,10 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
             from . import steady_cli
 
             steady_cli.add_arguments(p)
+        elif name == "regimes":
+            from . import regimes_cli
+
+            regimes_cli.add_arguments(p)
         else:
             from optim import cli as optim_cli
 
@@ -360,6 +366,10 @@ def main(argv=None) -> int:
             from . import steady_cli
 
             return steady_cli.run(args)
+        if args.command == "regimes":
+            from . import regimes_cli
+
+            return regimes_cli.run(args)
         if args.command == "optimize":
             from optim import cli as optim_cli
 

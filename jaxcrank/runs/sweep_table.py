@@ -24,9 +24,14 @@ def columns(names: Sequence[str]) -> list[str]:
     return ["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + ["status", "message"] + list(METRICS) + ["steps"]
 
 
-def read_table(path) -> dict[str, Shaped[np.ndarray, " rows"]]:
+#: the text columns of a sweep table (every other column holds numbers)
+TEXT_COLUMNS = ("status", "message")
+
+
+def read_table(path, text: Sequence[str] = TEXT_COLUMNS) -> dict[str, Shaped[np.ndarray, " rows"]]:
     """A sweep table (CSV) as columns: numbers as float arrays (empty cells NaN),
-    ``status`` and ``message`` as string arrays; rows sorted by ``index``.
+    the ``text`` columns (``status`` and ``message``; a regime table adds ``regime``) as
+    string arrays; rows sorted by ``index``.
 
     Raises:
         CorruptFileError: the file has no header, a row with more or fewer cells than
@@ -51,7 +56,7 @@ def read_table(path) -> dict[str, Shaped[np.ndarray, " rows"]]:
             )
         row = dict(zip(header, cells))
         for key, v in row.items():
-            if key in ("status", "message"):
+            if key in text:
                 continue
             try:
                 float(v) if v != "" else None
@@ -65,10 +70,10 @@ def read_table(path) -> dict[str, Shaped[np.ndarray, " rows"]]:
             raise CorruptFileError(f"{path}: line {n}: design index {row['index']} appears twice")
         seen.add(row["index"])
         rows.append(row)
-    return table_from_rows(rows)
+    return table_from_rows(rows, text)
 
 
-def table_from_rows(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
+def table_from_rows(rows: list[dict[str, str]], text: Sequence[str] = TEXT_COLUMNS) -> dict[str, np.ndarray]:
     """Rows of CSV cells (strings) as columns sorted by ``index`` (see
     [`read_table`][jaxcrank.runs.sweep_table.read_table] )."""
     if not rows:
@@ -77,7 +82,7 @@ def table_from_rows(rows: list[dict[str, str]]) -> dict[str, np.ndarray]:
     out = {}
     for key in rows[0]:
         vals = [r[key] for r in rows]
-        if key in ("status", "message"):
+        if key in text:
             out[key] = np.array(vals, dtype=object)
         else:
             out[key] = np.array([float(v) if v != "" else np.nan for v in vals])
@@ -117,10 +122,11 @@ def atomic_write(path: Path, write) -> None:
     os.replace(tmp, path)
 
 
-def resumable_rows(path: Path, cols, names, designs) -> set[int]:
+def resumable_rows(path: Path, cols, names, designs, text: Sequence[str] = TEXT_COLUMNS) -> set[int]:
     """Indices of the designs already in the table at ``path``, after checking that the
-    table belongs to this sweep: its header, indices and parameter values (exact)."""
-    table = read_table(path)
+    table belongs to this sweep: its header, indices and parameter values (exact).
+    ``text``: the table's text columns (as [`read_table`][jaxcrank.runs.sweep_table.read_table])."""
+    table = read_table(path, text)
     with open(path, newline="") as f:
         header = next(csv.reader(f), None)
     if header != cols:
