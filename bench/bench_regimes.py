@@ -34,24 +34,14 @@ from jaxcrank.numerics.steady import steady_state
 from jaxcrank.physics.params import get_parameter, set_parameters
 from jaxcrank.runs import regimes
 from optim.design import design_problem
+from optim.presets import NOT_PERIODIC_SI
 
 jax.config.update("jax_enable_x64", True)
 ROOT = Path(__file__).resolve().parent
 NAMES = ["rod_mass", "clearance_B"]
 
 
-#: a design of the nine-variable problem whose motion from rest is not periodic (tests/test_regimes.py)
-CHAOTIC_SI = [
-    0.3833234480768442,
-    0.7132069223869358,
-    0.000346804565563798,
-    0.0004574124407023192,
-    1.7902927123941481,
-    0.08251968631520867,
-    2.3336053458042443,
-    0.13980346222408116,
-    167591445464.64087,
-]
+CHAOTIC_SI = list(NOT_PERIODIC_SI)
 
 
 def _table(t):

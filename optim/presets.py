@@ -49,3 +49,17 @@ ADAM_RUNS_SI = (
         158357758934.72577,
     ),
 )
+
+#: A design of the nine-variable problem (SI, same order) whose motion from rest is still not
+#: periodic after 20 revolutions: a reference for regime maps that mix regimes.
+NOT_PERIODIC_SI = (
+    0.3833234480768442,
+    0.7132069223869358,
+    0.000346804565563798,
+    0.0004574124407023192,
+    1.7902927123941481,
+    0.08251968631520867,
+    2.3336053458042443,
+    0.13980346222408116,
+    167591445464.64087,
+)

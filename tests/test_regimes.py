@@ -20,22 +20,12 @@ from jaxcrank.numerics import shooting
 from jaxcrank.physics import model
 from jaxcrank.physics.params import get_parameter
 from jaxcrank.runs import regimes
+from optim.presets import NOT_PERIODIC_SI
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = ["rod_mass", "clearance_B"]
 
-#: nine-variable design (SI, the design problem's variable order) whose motion is not periodic
-CHAOTIC_SI = [
-    0.3833234480768442,
-    0.7132069223869358,
-    0.000346804565563798,
-    0.0004574124407023192,
-    1.7902927123941481,
-    0.08251968631520867,
-    2.3336053458042443,
-    0.13980346222408116,
-    167591445464.64087,
-]
+CHAOTIC_SI = list(NOT_PERIODIC_SI)
 
 kernel_only = pytest.mark.skipif(not regimes.resolve_engine(None) == "kernel", reason="no C compiler")
 

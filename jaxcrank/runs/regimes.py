@@ -75,14 +75,13 @@ import numpy as np
 from jaxtyping import ArrayLike, Float, Shaped
 from tqdm.auto import tqdm
 
-from ..errors import CorruptFileError
 from ..numerics import shooting
 from ..numerics.shooting import STEADY_DEFAULTS
 from ..numerics.solve import SolveOptions
 from ..physics import model
 from ..physics.params import Mechanism, ParameterError, parameter_unit, set_parameters
-from .sweep_design import MESSAGES, STATUSES, validate
-from .sweep_table import append, atomic_write, csv_text, read_table, resumable_rows, table_from_rows
+from .sweep_design import MESSAGES, STATUSES, split_valid
+from .sweep_table import append, atomic_write, csv_text, open_table, read_table, table_from_rows
 
 #: the regimes (``""``: the design failed or is invalid)
 REGIMES = ("periodic", "not periodic")
@@ -259,7 +258,7 @@ def classify(
     if designs.ndim != 2 or designs.shape[1] != len(names):
         raise ParameterError(f"designs must have one column per parameter {names}, got shape {designs.shape}")
     cols = columns(names)
-    path, done = _open(out, resume, designs, cols, names)
+    path, done = open_table(out, resume, designs, cols, names, TEXT_COLUMNS)
     if out is not None:
         from .engines import ENGINE_FILE
 
@@ -274,17 +273,8 @@ def classify(
     def row(i, status, message="", regime="", period="", distance="", steps=""):
         return [i] + [repr(float(v)) for v in designs[i]] + [status, message, regime, period, distance, steps]
 
-    todo, invalid = [], []
-    for i in range(len(designs)):
-        if i in done:
-            continue
-        try:
-            validate(set_parameters(base, names, [float(v) for v in designs[i]]))
-            todo.append(i)
-        except ParameterError as err:
-            given = ", ".join(f"{n} = {v:g}" for n, v in zip(names, designs[i]))
-            invalid.append(row(i, "invalid", f"{given}: {err}"))
-    emit(invalid)
+    todo, invalid = split_valid(base, names, designs, done)
+    emit([row(i, "invalid", message) for i, message in invalid])
     if chunk is None:
         from .engines import default_chunk
 
@@ -316,38 +306,6 @@ def classify(
     if path is not None:
         return read_table(path, TEXT_COLUMNS)
     return table_from_rows([dict(zip(cols, map(str, r))) for r in rows], TEXT_COLUMNS)
-
-
-def _open(out, resume, designs, cols, names):
-    """The table's path in ``out`` (None without ``out``) and the designs already in it,
-    after the sweep's checks ([`jaxcrank.runs.sweep.run`][])."""
-    if out is None:
-        return None, set()
-    out = Path(out)
-    path = out / "table.csv"
-    if path.exists() and not resume:
-        raise ParameterError(
-            f"{out} already holds a table (table.csv): pass resume=True (--resume) to continue it "
-            "or choose another output directory"
-        )
-    done: set[int] = set()
-    if resume and (out / "designs.npy").exists():
-        try:
-            old = np.load(out / "designs.npy")
-        except (ValueError, OSError, EOFError) as err:
-            raise CorruptFileError(
-                f"{out / 'designs.npy'}: cannot be read ({err}); the run cannot be resumed "
-                "(move the directory away to start over)"
-            ) from None
-        if old.shape != designs.shape or not np.array_equal(old, designs):
-            raise ParameterError(f"{out} holds a run over other designs: resume needs the same spec")
-    if resume and path.exists():
-        done = resumable_rows(path, cols, names, designs, TEXT_COLUMNS)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / "designs.npy", lambda f: np.save(f, designs))
-    if not path.exists():
-        atomic_write(path, lambda f: f.write(csv_text([cols]).encode()))
-    return path, done
 
 
 def summarize(table: Mapping[str, Shaped[np.ndarray, " designs"]]) -> dict:

@@ -66,9 +66,17 @@ from jaxtyping import ArrayLike, Float, Shaped
 from tqdm.auto import tqdm
 
 from ..analysis.metrics import METRICS
-from ..errors import CorruptFileError
-from ..physics.params import Mechanism, ParameterError, set_parameters
-from .sweep_design import MESSAGES, SOLVE_KEYS, STATUSES, Settings, SweepSettings, simulate_design, validate
+from ..physics.params import Mechanism, ParameterError
+from .sweep_design import (
+    MESSAGES,
+    SOLVE_KEYS,
+    STATUSES,
+    Settings,
+    SweepSettings,
+    simulate_design,
+    split_valid,
+    validate,
+)
 from .sweep_dispatch import (
     batch_bytes,
     check_chunk_fits,
@@ -78,7 +86,7 @@ from .sweep_dispatch import (
     resolve_chunk,
 )
 from .sweep_dispatch import evaluate as _evaluate
-from .sweep_table import append, atomic_write, columns, csv_text, read_table, resumable_rows, table_from_rows
+from .sweep_table import append, atomic_write, columns, csv_text, open_table, read_table, table_from_rows
 from .sweep_workers import run_in_workers
 
 __all__ = [
@@ -160,34 +168,9 @@ def run(
         raise ParameterError(f"designs must have one column per parameter {names}, got shape {designs.shape}")
     cols = columns(names)
     writer = jax.process_index() == 0
-    path = None
-    done: set[int] = set()
-    if out is not None:
-        out = Path(out)
-        path = out / "table.csv"
-        if path.exists() and not resume:
-            raise ParameterError(
-                f"{out} already holds a sweep (table.csv): pass resume=True (--resume) "
-                "to continue it or choose another output directory"
-            )
-        if resume and (out / "designs.npy").exists():
-            try:
-                old = np.load(out / "designs.npy")
-            except (ValueError, OSError, EOFError) as err:
-                raise CorruptFileError(
-                    f"{out / 'designs.npy'}: cannot be read ({err}); the sweep cannot be "
-                    "resumed (move the directory away to start over)"
-                ) from None
-            if old.shape != designs.shape or not np.array_equal(old, designs):
-                raise ParameterError(f"{out} holds a sweep over other designs: resume needs the same spec")
-        if resume and path.exists():
-            done = resumable_rows(path, cols, names, designs)
-        if writer:
-            out.mkdir(parents=True, exist_ok=True)
-            atomic_write(out / "designs.npy", lambda f: np.save(f, designs))
-            atomic_write(out / engines.ENGINE_FILE, lambda f: f.write(engine.encode()))
-            if not path.exists():
-                atomic_write(path, lambda f: f.write(csv_text([cols]).encode()))
+    path, done = open_table(out, resume, designs, cols, names, writer=writer)
+    if path is not None and writer:
+        atomic_write(Path(out) / engines.ENGINE_FILE, lambda f: f.write(engine.encode()))
     rows: list[list] = []
 
     def emit(new_rows):
@@ -200,17 +183,8 @@ def run(
         m = [repr(float(v)) for v in metrics] if metrics is not None else [""] * len(METRICS)
         return [i] + vals + [status, message] + m + [steps]
 
-    todo, invalid = [], []
-    for i in range(len(designs)):
-        if i in done:
-            continue
-        try:
-            validate(set_parameters(base, names, [float(v) for v in designs[i]]))
-            todo.append(i)
-        except ParameterError as err:
-            given = ", ".join(f"{n} = {v:g}" for n, v in zip(names, designs[i]))
-            invalid.append(row(i, "invalid", f"{given}: {err}"))
-    emit(invalid)
+    todo, invalid = split_valid(base, names, designs, done)
+    emit([row(i, "invalid", message) for i, message in invalid])
 
     # a multiple of the device count; one shape for every chunk (one compilation)
     n_dev = jax.device_count()

@@ -152,3 +152,22 @@ def validate(mech: Mechanism) -> Mechanism:
 
 #: The name sweeps have used for :class:`SweepSettings`.
 Settings = SweepSettings
+
+
+def split_valid(
+    base: Mechanism, names: Sequence[str], designs: np.ndarray, done: set[int] = frozenset()
+) -> tuple[list[int], list[tuple[int, str]]]:
+    """The designs (rows of ``designs``, SI values of ``names`` on ``base``) not in ``done``,
+    split by [`validate`][jaxcrank.runs.sweep_design.validate]: the indices to solve, and
+    ``(index, message)`` of the invalid ones, the message giving the values and the error."""
+    todo, invalid = [], []
+    for i in range(len(designs)):
+        if i in done:
+            continue
+        try:
+            validate(set_parameters(base, list(names), [float(v) for v in designs[i]]))
+            todo.append(i)
+        except ParameterError as err:
+            given = ", ".join(f"{n} = {v:g}" for n, v in zip(names, designs[i]))
+            invalid.append((i, f"{given}: {err}"))
+    return todo, invalid

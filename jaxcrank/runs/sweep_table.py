@@ -144,3 +144,50 @@ def resumable_rows(path: Path, cols, names, designs, text: Sequence[str] = TEXT_
                 f"sweep's {list(designs[i])}; the table is corrupted or from another sweep"
             )
     return {int(i) for i in table.get("index", [])}
+
+
+def open_table(
+    out, resume: bool, designs: np.ndarray, cols, names, text: Sequence[str] = TEXT_COLUMNS, writer: bool = True
+) -> tuple[Path | None, set[int]]:
+    """Open the table of a run over ``designs`` in the directory ``out``: ``table.csv``'s
+    path (None without ``out``) and the indices of the designs already in it.
+
+    A new run writes ``designs.npy`` and the table's header; ``resume`` continues an
+    existing one after checking that it is over the same designs (exactly) and that its
+    table is this run's ([`resumable_rows`][jaxcrank.runs.sweep_table.resumable_rows]).
+    Only a ``writer`` (process 0 of a distributed job) writes.
+
+    Raises:
+        ParameterError: ``out`` holds a table but ``resume`` is not set, or a run over other designs.
+        CorruptFileError: ``designs.npy`` or the table cannot be read.
+    """
+    from ..physics.params import ParameterError
+
+    if out is None:
+        return None, set()
+    out = Path(out)
+    path = out / "table.csv"
+    if path.exists() and not resume:
+        raise ParameterError(
+            f"{out} already holds a table (table.csv): pass resume=True (--resume) to continue it "
+            "or choose another output directory"
+        )
+    done: set[int] = set()
+    if resume and (out / "designs.npy").exists():
+        try:
+            old = np.load(out / "designs.npy")
+        except (ValueError, OSError, EOFError) as err:
+            raise CorruptFileError(
+                f"{out / 'designs.npy'}: cannot be read ({err}); the run cannot be resumed "
+                "(move the directory away to start over)"
+            ) from None
+        if old.shape != designs.shape or not np.array_equal(old, designs):
+            raise ParameterError(f"{out} holds a run over other designs: resume needs the same spec")
+    if resume and path.exists():
+        done = resumable_rows(path, cols, names, designs, text)
+    if writer:
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write(out / "designs.npy", lambda f: np.save(f, designs))
+        if not path.exists():
+            atomic_write(path, lambda f: f.write(csv_text([cols]).encode()))
+    return path, done
