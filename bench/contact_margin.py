@@ -16,7 +16,8 @@ relative to their RMS. No simulation with clearance enters it. Two questions:
 2. **Is it a way in?** From the start design and from the first not-periodic Sobol designs
    (``--starts`` in all), projected Adam ascent on the margin (step ``--lr`` in the unit
    box), each iterate classified by the steady-state solve (value only) until one is
-   periodic or ``--max-steps`` iterates are spent. Reported: classifications, wall time
+   periodic or ``--max-steps`` iterates are spent (each start with its own evaluator, warm-started
+   only along its own path). Reported: classifications, wall time
    and the margin at entry, against regime-classified multistart, whose expected number
    of classifications until the first periodic design is 1 / (periodic fraction) among the
    labelled designs.
@@ -110,6 +111,7 @@ def main(argv=None):
     starts = [units[0]] + [u for u, p in zip(units[1:], periodic[1:]) if not p]
     ways = []
     for u0 in starts[: args.starts]:
+        evaluator = SteadyEvaluator(problem)  # no warm start from another start's orbit
         u = jnp.asarray(u0)
         opt = optax.adam(args.lr)
         state = opt.init(u)
