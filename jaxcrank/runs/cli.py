@@ -192,7 +192,8 @@ TOML spec (SI units; every key but [parameters] optional):
 
 Engines: --engine kernel (default where a C compiler is available: one design per CPU
 thread, tsit5 only, chunk default 16 per thread) or --engine xla (every solver; several
-CPU cores: --workers N local processes). Several devices: every local
+CPU cores: --workers N local processes). --out records the engine (engine.txt) and
+--resume keeps it. Several devices: every local
 device is used (a GPU machine's GPUs). Several machines: see docs/sweeps.md, "On a cluster".
 """
 
