@@ -77,6 +77,7 @@ def main(argv=None):
     import jax.numpy as jnp
     import optax
 
+    from jaxcrank.numerics.steady import SteadyStateError
     from jaxcrank.physics import ideal
     from optim.steady import SteadyEvaluator
 
@@ -117,9 +118,13 @@ def main(argv=None):
         state = opt.init(u)
         steps, t0, entry = [], time.perf_counter(), None
         for k in range(args.max_steps):
-            value, info = evaluator.value(np.asarray(problem.from_unit(np.asarray(u))))
+            try:
+                value, info = evaluator.value(np.asarray(problem.from_unit(np.asarray(u))))
+                regime = info["regime"] if info["ok"] else "failed"
+            except SteadyStateError as err:  # a failed solve: a failed classification, as in the head-to-head
+                value, regime = math.nan, f"failed: {str(err).split(':')[0]}"
             mk, g = value_and_grad(u)
-            steps.append({"margin": float(mk), "regime": info["regime"] if info["ok"] else "failed", "value": value})
+            steps.append({"margin": float(mk), "regime": regime, "value": value})
             if steps[-1]["regime"] == "periodic":
                 entry = k + 1
                 break

@@ -645,7 +645,7 @@ def headline() -> str:
             [
                 f"design head-to-head on the steady state, {problem['n_variables']} variables: held-out value of "
                 f"the returned design, ours / best gradient-free ({best}), {design['budget_s_per_method']:.0f} s "
-                "each, 2 cores",
+                + ("each, 1 core" if design["machine"].get("cpus_usable") == 1 else "each, 2 cores"),
                 f"{methods['ours']['best_heldout']:.4g} / {free[best]['best_heldout']:.4g} deg ({when})",
                 "`design.json`",
             ]
