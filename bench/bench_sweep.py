@@ -101,7 +101,7 @@ def batched(n, batch, revolutions, workers=1):
     chunk = max(batch, jax.device_count())
     if workers > 1:
         return _workers(jc.paper(), names, xs, settings, workers)
-    run = lambda: sweep.run(base, names, xs, settings, chunk=chunk, progress=False)  # noqa: E731
+    run = lambda: sweep.run(base, names, xs, settings, chunk=chunk, progress=False, engine="xla")  # noqa: E731
     table, first = timed(run)
     wall = timed(run)[1]
     failed = int(sum(s != "ok" for s in table["status"]))

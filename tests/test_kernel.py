@@ -113,7 +113,7 @@ DESIGNS = np.array([[5e-4, 5e-4, 0.9], [4.6e-4, 5.3e-4, 0.8], [5.4e-4, 4.7e-4, 0
 
 def jax_path(names, designs, settings):
     """The XLA engine's table (each design solved alone, as the CPU sweep does)."""
-    return sweep.run(jc.paper(), names, designs, settings, chunk=1, progress=False)
+    return sweep.run(jc.paper(), names, designs, settings, chunk=1, progress=False, engine="xla")
 
 
 def test_free_flight_metrics_equal_the_jax_path_per_design():

@@ -42,7 +42,7 @@ def test_summary_sweep_row_and_sensitivity_give_identical_metrics():
     so does ``simulate`` for Python-float parameters)."""
     settings = sweep.Settings(revolutions=0.2, samples_per_revolution=720, metrics_from_revolution=0.05)
     base = jc.paper()
-    row = sweep.run(base, ["rod_length"], [[float(base.rod_length)]], settings, chunk=1, progress=False)
+    row = sweep.run(base, ["rod_length"], [[float(base.rod_length)]], settings, chunk=1, progress=False, engine="xla")
     assert row["status"][0] == "ok"
     mech = set_parameters(base, ["rod_length"], jnp.array([float(base.rod_length)]))
     sim = jc.simulate(

@@ -82,7 +82,7 @@ def test_workers_give_the_single_process_table():
     """Two local worker processes, each design solved alone (one per chunk), give the
     table of one process exactly, failures and invalid designs included."""
     alone = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, progress=False, engine="xla")
-    pooled = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, workers=2, progress=False)
+    pooled = sweep.run(jc.paper(), NAMES, DESIGNS, SHORT, chunk=1, workers=2, progress=False, engine="xla")
     assert list(alone["status"]) == list(pooled["status"]) == ["ok", "max_steps", "ok", "invalid", "ok"]
     for k in ["index", "steps"] + list(metrics.METRICS):
         np.testing.assert_array_equal(pooled[k], alone[k], err_msg=k)
