@@ -225,7 +225,9 @@ def main():
     def build(u):
         return prob.mechanism(lo + u * (hi - lo))
 
-    state = json.loads(args.out.read_text()) if args.out.exists() else {"screened": [], "evaluated": []}
+    state = {"screened": [], "evaluated": []}
+    if args.out.exists():
+        state = {k: json.loads(args.out.read_text())[k] for k in state}
     cands = candidates(prob, args.sobol, args.seed)
     state["screened"] = screen(prob, build, cands, state["screened"])
     _write(args, state)
