@@ -265,14 +265,15 @@ def test_period_three_orbit_against_a_long_run():
     assert min(np.max(np.abs(ys[-j] - y)) for j in (1, 2, 3)) <= 1e-6
 
 
-def _from_rest(u, revolutions=30):
+def _from_rest(u, revolutions=30, k=1):
     """Section state after ``revolutions`` from rest (scaled) and Eq. 19 over the next
-    revolution, by plain simulation of the design ``u``."""
+    ``k`` revolutions, by plain simulation of the design ``u`` (no shooting; rtol = atol =
+    1e-10)."""
     mech = _build(jnp.asarray(u))
     T = float(mech.period)
     sim = jc.simulate(
         mech,
-        ts=jnp.linspace(0.0, (revolutions + 1) * T, (revolutions + 1) * 3600 + 1),
+        ts=jnp.linspace(0.0, (revolutions + k) * T, (revolutions + k) * 3600 + 1),
         metrics_start=revolutions * T,
         save_ts=jnp.array([revolutions * T]),
         rtol=1e-10,
@@ -334,21 +335,8 @@ def test_exact_gradient_against_differences_from_rest_where_they_stay_on_the_orb
 
 
 def _eq19_from_rest(u, k, revolutions=30):
-    """Eq. 19 over the ``k`` revolutions after ``revolutions`` from rest (plain simulation
-    of the design ``u``, no shooting; rtol = atol = 1e-10)."""
-    mech = _build(jnp.asarray(u))
-    T = float(mech.period)
-    sim = jc.simulate(
-        mech,
-        t1=(revolutions + k) * T,
-        n_samples=(revolutions + k) * 3600 + 1,
-        metrics_start=revolutions * T,
-        save_samples=False,
-        rtol=1e-10,
-        atol=1e-10,
-        max_steps=10_000_000,
-    )
-    return float(sim.metrics[KEY])
+    """Eq. 19 over the ``k`` revolutions after ``revolutions`` from rest ([`_from_rest`])."""
+    return _from_rest(u, revolutions, k)[1]
 
 
 #: Unit-box designs of the nine-variable problem (scrambled Sobol points, seed 0, of
