@@ -10,24 +10,11 @@ import pytest
 
 from jaxcrank.physics.params import ParameterError
 from optim import search
-from optim.objective import Ensemble, Pathwise
+from optim.objective import Pathwise
 from optim.optimize import Settings, multistart, optimize, programs, start_points
 from optim.optimizers import adam, from_settings
 from optim.problem import paper_problem
-
-# Short ensemble objective: evaluation window (0.02, 0.03] s (impacts from the first
-# milliseconds on, chaotic by 20 ms), five 2 ms windows. The default suite solves the
-# windows with tsit5 (compiles in seconds, where the default implicit kvaerno5 takes
-# minutes); the ``slow`` tests check the default solver.
-SHORT = Ensemble(t_start=0.02, t_end=0.03, window_solver="tsit5")
-# A non-chaotic window for exact-gradient checks: the first 1.2 ms (see test_gradients).
-EXACT = Pathwise(t_start=0.0, t_end=1.2e-3, rtol=1e-10, atol=1e-10, max_steps=100_000)
-
-
-def central_difference(f, x, i, h):
-    e = np.zeros(len(x))
-    e[i] = h
-    return (float(f(jnp.asarray(x + e))) - float(f(jnp.asarray(x - e)))) / (2 * h)
+from tests.objectives import SHORT
 
 
 @pytest.fixture(scope="module")
