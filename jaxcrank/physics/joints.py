@@ -1,186 +1,327 @@
-"""The two joints that may have clearance, as objects: the crank pin B and the slider
-pin C (model.md, "Coordinates").
+"""Joint laws: what a joint of a mechanism does, independent of where it sits.
 
-Each joint is a pin on one body (the crank at B, the slider at C) in a hole at one
-end of the rod. An [`AbstractJointSite`][jaxcrank.physics.joints.AbstractJointSite] says which parameters belong to the
-joint and how its pin and hole move; everything else (state layout, contact,
-dynamics, outputs) loops over `JOINTS` or [`clearance_sites`][jaxcrank.physics.joints.clearance_sites] with one code
-path, whatever the joint.
+Every joint of a mechanism carries a law ([`AbstractJointLaw`][jaxcrank.physics.joints.AbstractJointLaw]):
+
+- [`Ideal`][jaxcrank.physics.joints.Ideal]: a perfect joint; the mechanism's tree of ideal joints holds it in
+  minimal coordinates, and it has neither force law nor state;
+- [`Clearance`][jaxcrank.physics.joints.Clearance]: a dry revolute clearance joint, a pin in a larger hole
+  with a normal contact law, a friction law and an approach-speed memory law
+  (model.md, paper Eq. 1-13);
+- [`Lubricated`][jaxcrank.physics.lubrication.Lubricated]: a revolute clearance joint with an oil film,
+  handed over to the dry law at high eccentricity (model.md, "Lubricated revolute joint"), registered
+  from [`jaxcrank.physics.lubrication`][].
+
+A law that is not ideal is a force element between the two bodies its joint connects:
+the equations of motion ask it for the wrench it applies ([`forces`][jaxcrank.physics.joints.AbstractJointLaw.forces])
+from where the joint's two sides are ([`JointKinematics`][jaxcrank.physics.joints.JointKinematics]), and for the rate
+of the state it declares ([`state_names`][jaxcrank.physics.joints.AbstractJointLaw.state_names],
+[`state_rate`][jaxcrank.physics.joints.AbstractJointLaw.state_rate]) once the accelerations are known. The
+equations of motion never look at a law's type or name.
+
+``name`` is a law's name in TOML files (``law = "clearance"``).
 """
 
 from __future__ import annotations
 
-import abc
-from typing import ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from . import ideal
-from .params import Joint, Material, Mechanism
+from .laws import effective_compliance
+from .memory import AbstractMemoryLaw, FrozenMemory, MemoryInput, memory_target, memory_target_rate
+from .params import Contact, Friction, Material, ParameterError, _concrete, check_range
+from .safemath import perp, safe_norm
 
 
-def perp(v: Float[ArrayLike, " 2"]) -> Float[Array, " 2"]:
-    """Rotate a planar vector by +90 degrees."""
-    return jnp.stack([-v[1], v[0]])
+class JointKinematics(NamedTuple):
+    """Where the two sides of a joint are and how they move (SI, world frame).
 
+    The *hole* side is the bearing (or the guide of a prismatic joint), the *pin* side
+    the journal (or the slider). Positions are the joint's points on each body.
 
-def rod_half(mech: Mechanism, q: Float[ArrayLike, " 4"]) -> Float[Array, " 2"]:
-    """Vector from the rod's centre of mass to its end C (to end B: minus it), m, for
-    full coordinates Q = (x2, y2, theta2, x3)."""
-    return 0.5 * mech.rod_length * jnp.stack([jnp.cos(q[2]), jnp.sin(q[2])])
-
-
-class JointMotion(NamedTuple):
-    """Where the pin and the hole of one joint are and how they move (SI)."""
-
-    pin_position: jax.Array  # pin centre, m, (2,)
-    pin_velocity: jax.Array  # m/s, (2,)
-    pin_angular_velocity: jax.Array | float  # of the body carrying the pin, rad/s
-    hole_position: jax.Array  # hole centre (a rod end), m, (2,)
-    hole_velocity: jax.Array  # m/s, (2,)
-    hole_angular_velocity: jax.Array | float  # of the rod, rad/s
-
-
-class AbstractJointSite(eqx.Module):
-    """One joint of the mechanism: a pin on the crank or slider in a hole at one rod end.
-
-    Subclasses say which [`Joint`][jaxcrank.physics.params.Joint] and pin material of
-    the [`Mechanism`][jaxcrank.physics.params.Mechanism] are theirs, how the pin moves, at
-    which rod end the hole sits, and what the contact force on the pin does to the
-    slider coordinate x3.
+    Attributes:
+        hole_position: m, (2,).
+        hole_velocity: m/s, (2,).
+        hole_angle: angle of the hole side's frame, rad (its body's angle plus the
+            joint's direction on it).
+        hole_angular_velocity: rad/s.
+        pin_position: m, (2,).
+        pin_velocity: m/s, (2,).
+        pin_angle: rad.
+        pin_angular_velocity: rad/s.
     """
 
-    name: eqx.AbstractClassVar[str]
-
-    @abc.abstractmethod
-    def joint(self, mech: Mechanism) -> Joint:
-        """The joint's radii and ideal flag."""
-
-    @abc.abstractmethod
-    def pin_material(self, mech: Mechanism) -> Material:
-        """Material of the pin's body (the hole is always in the rod)."""
-
-    @abc.abstractmethod
-    def pin_position(self, mech: Mechanism, slider_x: Float[ArrayLike, ""], t: Float[ArrayLike, ""]) -> Array:
-        """Pin centre, m, at time t (s) with the slider at ``slider_x`` (m)."""
-
-    @abc.abstractmethod
-    def pin_motion(self, mech: Mechanism, q, qd, t) -> tuple[Array, Array, Array | float]:
-        """(pin centre, m; its velocity, m/s; angular velocity of its body, rad/s) for
-        full coordinates Q and their rates at time t (s)."""
-
-    @abc.abstractmethod
-    def pin_acceleration(self, mech: Mechanism, q, qd, qdd, t) -> Array:
-        """Acceleration of the pin centre, m/s^2 (the crank turns at constant speed)."""
-
-    @abc.abstractmethod
-    def from_centre(self, centre, half):
-        """The rod end of this joint from the rod's centre (or its rate) and
-        [`rod_half`][jaxcrank.physics.joints.rod_half] (or its rate)."""
-
-    @abc.abstractmethod
-    def to_centre(self, end, half):
-        """The rod's centre from this joint's rod end and [`rod_half`][jaxcrank.physics.joints.rod_half] (inverse of
-        [`from_centre`][jaxcrank.physics.joints.AbstractJointSite.from_centre])."""
-
-    @abc.abstractmethod
-    def slider_load(self, force_on_pin: Float[ArrayLike, " 2"]) -> Array | float:
-        """Generalized force on x3 of the contact force on the pin, N."""
-
-    def motion(self, mech: Mechanism, q, qd, t) -> JointMotion:
-        """The joint's [`JointMotion`][jaxcrank.physics.joints.JointMotion] for full coordinates Q = (x2, y2, theta2,
-        x3)
-        and their rates at time t (s)."""
-        half = rod_half(mech, q)
-        half_dot = qd[2] * perp(half)
-        pin, pin_vel, pin_omega = self.pin_motion(mech, q, qd, t)
-        return JointMotion(
-            pin, pin_vel, pin_omega, self.from_centre(q[:2], half), self.from_centre(qd[:2], half_dot), qd[2]
-        )
-
-    def accelerations(self, mech: Mechanism, q, qd, qdd, t) -> tuple[Array, Array]:
-        """(pin acceleration, hole acceleration), m/s^2: the time derivatives of the
-        velocities in [`motion`][jaxcrank.physics.joints.AbstractJointSite.motion]."""
-        half = rod_half(mech, q)
-        half_ddot = qdd[2] * perp(half) - qd[2] ** 2 * half
-        return self.pin_acceleration(mech, q, qd, qdd, t), self.from_centre(qdd[:2], half_ddot)
+    hole_position: Array
+    hole_velocity: Array
+    hole_angle: Array
+    hole_angular_velocity: Array
+    pin_position: Array
+    pin_velocity: Array
+    pin_angle: Array
+    pin_angular_velocity: Array
 
 
-class CrankPin(AbstractJointSite):
-    """Joint B: the crank pin in the hole at the rod's end B."""
+class JointAccelerations(NamedTuple):
+    """Accelerations of a joint's two points and bodies (SI, world frame), for the state
+    rates that need them."""
 
-    name: ClassVar[str] = "B"
-
-    def joint(self, mech):
-        return mech.joint_B
-
-    def pin_material(self, mech):
-        return mech.crank_material
-
-    def pin_position(self, mech, slider_x, t):
-        return ideal.crank_pin(mech, t)
-
-    def pin_motion(self, mech, q, qd, t):
-        pin = ideal.crank_pin(mech, t)
-        return pin, mech.crank_speed * perp(pin), mech.crank_speed
-
-    def pin_acceleration(self, mech, q, qd, qdd, t):
-        return -(mech.crank_speed**2) * ideal.crank_pin(mech, t)
-
-    def from_centre(self, centre, half):
-        return centre - half
-
-    def to_centre(self, end, half):
-        return end + half
-
-    def slider_load(self, force_on_pin):
-        return 0.0
+    hole_acceleration: Array  # m/s^2, (2,)
+    hole_angular_acceleration: Array  # rad/s^2
+    pin_acceleration: Array
+    pin_angular_acceleration: Array
 
 
-class SliderPin(AbstractJointSite):
-    """Joint C: the slider pin (on the line y = e) in the hole at the rod's end C."""
+class JointForces(NamedTuple):
+    """The wrench a joint law applies and what it reports (SI, world frame).
 
-    name: ClassVar[str] = "C"
+    The pin side receives ``force`` at ``pin_point`` plus the pure moment ``pin_moment``;
+    the hole side receives ``-force`` at ``hole_point`` plus ``hole_moment``.
 
-    def joint(self, mech):
-        return mech.joint_C
+    Attributes:
+        force: on the pin side, N, (2,).
+        pin_point: where it acts on the pin side, m, (2,).
+        hole_point: where its reaction acts on the hole side, m, (2,).
+        pin_moment: pure moment on the pin side, N m.
+        hole_moment: pure moment on the hole side, N m.
+        dissipation: power the law dissipates, W (>= 0).
+        elastic_energy: energy stored in the law, J.
+        eccentricity: pin position relative to the hole, m, (2,).
+        penetration: largest penetration, m (negative when separated).
+        normal_force: magnitude of the normal force, N.
+        friction_force: friction force along the tangent, N.
+        slip_speed: tangential slip speed at the contact, m/s.
+        aux: what the law's [`state_rate`][jaxcrank.physics.joints.AbstractJointLaw.state_rate] needs of this
+            instant (law-specific).
+    """
 
-    def pin_material(self, mech):
-        return mech.slider_material
-
-    def pin_position(self, mech, slider_x, t):
-        return jnp.stack([slider_x, jnp.asarray(mech.offset, dtype=float)])
-
-    def pin_motion(self, mech, q, qd, t):
-        return self.pin_position(mech, q[3], t), jnp.stack([qd[3], jnp.zeros_like(qd[3])]), 0.0
-
-    def pin_acceleration(self, mech, q, qd, qdd, t):
-        return jnp.stack([qdd[3], jnp.zeros_like(qdd[3])])
-
-    def from_centre(self, centre, half):
-        return centre + half
-
-    def to_centre(self, end, half):
-        return end - half
-
-    def slider_load(self, force_on_pin):
-        return force_on_pin[0]
-
-
-CRANK_PIN = CrankPin()
-SLIDER_PIN = SliderPin()
-#: Every joint that may have clearance, in state order.
-JOINTS: tuple[AbstractJointSite, ...] = (CRANK_PIN, SLIDER_PIN)
-
-
-def clearance_sites(mech: Mechanism) -> tuple[AbstractJointSite, ...]:
-    """The joints with clearance, in state order (static)."""
-    return tuple(site for site in JOINTS if not site.joint(mech).ideal)
+    force: Array
+    pin_point: Array
+    hole_point: Array
+    pin_moment: Array
+    hole_moment: Array
+    dissipation: Array
+    elastic_energy: Array
+    eccentricity: Array
+    penetration: Array
+    normal_force: Array
+    friction_force: Array
+    slip_speed: Array
+    aux: Any = None
 
 
-def clearance_joints(mech: Mechanism) -> tuple[str, ...]:
-    """Names of the joints with clearance, in state order (static)."""
-    return tuple(site.name for site in clearance_sites(mech))
+class AbstractJointLaw(eqx.Module):
+    """What a joint does: ideal, or a force element with a state of its own.
+
+    ``kinds`` lists the joint kinds (``"revolute"``, ``"prismatic"``) the law applies
+    to; ``ideal`` says whether the joint is held by the mechanism's tree (no force law,
+    no state). Subclasses that are not ideal give
+    [`forces`][jaxcrank.physics.joints.AbstractJointLaw.forces], their state's names, scales and rates,
+    and the length that scales their deviations
+    ([`clearance`][jaxcrank.physics.joints.AbstractJointLaw.clearance]).
+    """
+
+    name: ClassVar[str]
+    kinds: ClassVar[tuple[str, ...]]
+    ideal: ClassVar[bool] = False
+
+    def state_names(self) -> tuple[str, ...]:
+        """Names of the law's state entries (in state order); none by default."""
+        return ()
+
+    def state_scales(self, speed_scale) -> tuple:
+        """Physical value of one scaled unit of each state entry (SI), given the
+        mechanism's speed scale (m/s: clearance times crank speed)."""
+        return ()
+
+    def initial_state(self) -> Float[Array, " k"]:
+        """The law's state at the start of a run from rest relative to the ideal motion (SI)."""
+        return jnp.zeros(len(self.state_names()))
+
+    @property
+    def clearance(self):
+        """The length over which the joint's two sides can move apart, m (none for ideal
+        joints)."""
+        raise NotImplementedError(f"the {self.name!r} law has no clearance")
+
+    def forces(self, kin: JointKinematics, state: Float[Array, " k"]) -> JointForces:
+        """The wrench the law applies at one instant, from its kinematics and state (SI)."""
+        raise NotImplementedError(f"the {self.name!r} law applies no force")
+
+    def state_rate(
+        self, kin: JointKinematics, acc: JointAccelerations, state: Float[Array, " k"], forces: JointForces
+    ) -> Float[Array, " k"]:
+        """d(state)/dt (SI), given the accelerations and this instant's ``forces``."""
+        return jnp.zeros(len(self.state_names()))
+
+
+class Ideal(AbstractJointLaw):
+    """A perfect joint: no clearance, no force law, no state (revolute or prismatic)."""
+
+    name: ClassVar[str] = "ideal"
+    kinds: ClassVar[tuple[str, ...]] = ("revolute", "prismatic")
+    ideal: ClassVar[bool] = True
+
+
+class Clearance(AbstractJointLaw):
+    """A dry revolute clearance joint: a pin (journal) of radius ``pin_radius`` in a
+    hole (bearing) of radius ``hole_radius`` (model.md, paper Eq. 1-13).
+
+    The radial clearance is ``c = hole_radius - pin_radius`` (paper Eq. 1). The pin
+    touches the wall when its eccentricity exceeds c; the normal force follows
+    ``contact``, the tangential force ``friction``, and the approach speed the contact
+    law divides by is the state of ``memory``.
+
+    Attributes:
+        hole_radius: bearing radius R_h, m.
+        pin_radius: journal radius R_p, m; must be smaller than ``hole_radius``.
+        contact: the normal contact law and its settings.
+        friction: the friction law and its settings.
+        memory: the approach-speed memory law.
+        pin_material: elastic properties of the pin's surface.
+        hole_material: elastic properties of the hole's surface.
+
+    Raises:
+        ParameterError: a radius that is not positive, or a pin not smaller than its hole.
+    """
+
+    name: ClassVar[str] = "clearance"
+    kinds: ClassVar[tuple[str, ...]] = ("revolute",)
+
+    hole_radius: float
+    pin_radius: float
+    contact: Contact = Contact()
+    friction: Friction = Friction()
+    memory: AbstractMemoryLaw = FrozenMemory()
+    pin_material: Material = Material()
+    hole_material: Material = Material()
+
+    def __check_init__(self):
+        check_range("hole_radius", self.hole_radius, low=0.0, unit="m")
+        check_range("pin_radius", self.pin_radius, low=0.0, unit="m")
+        hole, pin = _concrete(self.hole_radius), _concrete(self.pin_radius)
+        if hole is not None and pin is not None and np.any(pin >= hole):
+            raise ParameterError(
+                f"pin_radius = {np.max(pin):g} m must be smaller than hole_radius = "
+                f"{np.min(hole):g} m (valid range: 0 < pin_radius < hole_radius); "
+                'for a joint without clearance use law = "ideal"'
+            )
+        if not isinstance(self.memory, AbstractMemoryLaw):
+            raise ParameterError(f"memory {self.memory!r} is not a jaxcrank.physics.memory.AbstractMemoryLaw")
+
+    @property
+    def clearance(self):
+        """Radial clearance c = R_h - R_p, m."""
+        return self.hole_radius - self.pin_radius
+
+    def state_names(self):
+        return self.memory.state_names
+
+    def state_scales(self, speed_scale):
+        return self.memory.state_scales(speed_scale)
+
+    def forces(self, kin, state):
+        return clearance_contact(self, kin, state)
+
+    def state_rate(self, kin, acc, state, forces):
+        v_rel = kin.pin_velocity - kin.hole_velocity
+        a_rel = acc.pin_acceleration - acc.hole_acceleration
+        target_rate = memory_target_rate(forces.eccentricity, v_rel, a_rel, self.clearance)
+        return self.memory.rate(state, MemoryInput(forces.penetration, forces.aux, target_rate))
+
+
+def clearance_contact(joint: Clearance, kin: JointKinematics, state: Float[ArrayLike, " k"]) -> JointForces:
+    """Kinematics and forces of one dry revolute clearance joint (model.md, paper Eq. 1-13).
+
+    Args:
+        joint: the joint's radii, materials and laws.
+        kin: where its pin and hole centres are and how they move.
+        state: its memory law's state (SI; the first entry is the approach-speed memory, m/s).
+
+    Returns:
+        The joint's [`JointForces`][jaxcrank.physics.joints.JointForces]; ``aux`` is the memory's target
+        normal speed ([`memory_target`][jaxcrank.physics.memory.memory_target]), m/s.
+    """
+    d = kin.pin_position - kin.hole_position
+    eps = safe_norm(d)
+    centred = eps > 0.0
+    n = jnp.where(centred, d / jnp.where(centred, eps, 1.0), 0.0)
+    tangent = perp(n)
+    r_h, r_p = joint.hole_radius, joint.pin_radius
+    delta = eps - joint.clearance
+    v_rel = kin.pin_velocity - kin.hole_velocity
+    delta_dot = jnp.dot(n, v_rel)
+    v_t = jnp.dot(tangent, v_rel) + kin.pin_angular_velocity * r_p - kin.hole_angular_velocity * r_h
+
+    c = joint.contact
+    compliance = effective_compliance(joint.pin_material.compliance, joint.hole_material.compliance)
+    approach = joint.memory.approach_speed(jnp.asarray(state))
+    geometry = dict(hole_radius=r_h, pin_radius=r_p, compliance_sum=compliance, exponent=c.exponent)
+    f_n, f_el = c.law.normal_force(delta, delta_dot, approach, c.restitution, **geometry)
+    fr = joint.friction
+    f_t = fr.law.force(v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
+    zero = jnp.zeros_like(f_n)
+    return JointForces(
+        force=-f_n * n + f_t * tangent,
+        pin_point=kin.pin_position + r_p * n,
+        hole_point=kin.hole_position + r_h * n,
+        pin_moment=zero,
+        hole_moment=zero,
+        dissipation=(f_n - f_el) * delta_dot - f_t * v_t,
+        elastic_energy=c.law.elastic_energy(delta, **geometry),
+        eccentricity=d,
+        penetration=delta,
+        normal_force=f_n,
+        friction_force=f_t,
+        slip_speed=v_t,
+        aux=memory_target(d, v_rel, joint.clearance),
+    )
+
+
+#: joint laws by their TOML name (modules that define more laws add them with `register_joint_law`)
+JOINT_LAWS: dict[str, type[AbstractJointLaw]] = {law.name: law for law in (Ideal, Clearance)}
+
+
+def register_joint_law(law: type[AbstractJointLaw]) -> type[AbstractJointLaw]:
+    """Add a joint-law class to `JOINT_LAWS` under its ``name``; returns it.
+
+    Raises:
+        ParameterError: for a class that is not an `AbstractJointLaw`, or a name already
+            taken by another class.
+    """
+    if not (isinstance(law, type) and issubclass(law, AbstractJointLaw)):
+        raise ParameterError(f"{law!r} is not a jaxcrank.physics.joints.AbstractJointLaw subclass")
+    if JOINT_LAWS.get(law.name, law) is not law:
+        raise ParameterError(f"joint law name {law.name!r} is already taken by {JOINT_LAWS[law.name].__name__}")
+    JOINT_LAWS[law.name] = law
+    return law
+
+
+def joint_state_size(law: AbstractJointLaw) -> int:
+    """Number of state entries a joint law declares (static)."""
+    return len(law.state_names())
+
+
+def stack_forces(forces: list[JointForces]) -> JointForces:
+    """Per-joint reports stacked along a leading joint axis (``aux`` dropped)."""
+    if not forces:
+        z2, z = jnp.zeros((0, 2)), jnp.zeros(0)
+        return JointForces(z2, z2, z2, z, z, z, z, z2, z, z, z, z)
+    fields = JointForces._fields[:-1]
+    return JointForces(*[jnp.stack([getattr(f, k) for f in forces]) for k in fields])
+
+
+__all__ = [
+    "JOINT_LAWS",
+    "AbstractJointLaw",
+    "Clearance",
+    "Ideal",
+    "JointAccelerations",
+    "JointForces",
+    "JointKinematics",
+    "clearance_contact",
+    "joint_state_size",
+    "register_joint_law",
+]

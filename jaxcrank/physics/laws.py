@@ -10,7 +10,7 @@ and differs only in its stiffness K(delta) and hysteresis factor chi(c_e)
 of
 ramp ([`AbstractFrictionLaw`][jaxcrank.physics.laws.AbstractFrictionLaw]). Names (`CONTACT_LAWS`,
 `FRICTION_LAWS`) are used only where text comes in: TOML files and the CLI.
-Powers, square roots and kinks are wrapped in double ``where`` so values and
+Powers, square roots and kinks go through [`jaxcrank.physics.safemath`][] so values and
 gradients stay finite everywhere, including delta <= 0 and zero slip.
 """
 
@@ -25,27 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 import scipy.optimize
 
-# --------------------------------------------------------------------------- safe math
-
-
-def safe_norm(v, axis=-1):
-    """Euclidean norm with a zero (not NaN) gradient at v = 0."""
-    sq = jnp.sum(v * v, axis=axis)
-    positive = sq > 0.0
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, sq, 1.0)), 0.0)
-
-
-def smoothstep(x):
-    """C2 quintic step 10x^3 - 15x^4 + 6x^5 of x clipped to [0, 1]: 0 at x <= 0, 1 at x >= 1."""
-    x = jnp.clip(x, 0.0, 1.0)
-    return x**3 * (10.0 - 15.0 * x + 6.0 * x**2)
-
-
-def positive_power(x, p):
-    """x**p for x > 0, else 0; finite gradient everywhere (p >= 1)."""
-    positive = x > 0.0
-    return jnp.where(positive, jnp.where(positive, x, 1.0) ** p, 0.0)
-
+from .safemath import positive_power, smoothstep
 
 # --------------------------------------------------------------------------- stiffness
 

@@ -1,10 +1,11 @@
-"""The state vector of a run with clearance joints and its scales (model.md, Eq. 14).
+"""The state vector of a mechanism with clearance joints and its scales.
 
-The solver state is the *deviation from the ideal mechanism* in generalized
-coordinates s; which coordinates exist depends on which joints are ideal
-([`jaxcrank.physics.model`][]). The state vector, every entry dimensionless
-([`state_scales`][jaxcrank.physics.state.state_scales]), is
-``y = (s, s', approach-speed memory per clearance joint, driver work, dissipated work)``.
+The solver state is the *deviation from the ideal mechanism* in the tree's generalized
+coordinates ([`jaxcrank.physics.topology.Tree`][]): s = q - q_ideal(phi), so s = 0 is the
+ideal motion and pins centred in their holes. Every entry is dimensionless
+([`state_scales`][jaxcrank.physics.state.state_scales]):
+
+``y = (s, s', the joint laws' states (joint by joint, sorted), driver work, dissipated work)``.
 """
 
 from __future__ import annotations
@@ -15,18 +16,56 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .joints import clearance_joints, clearance_sites
-from .params import Mechanism
+from .linkage import GROUND, AbstractMechanism, Linkage
+from .safemath import div, known, mul, sqrt, stop_gradient, vdot, vsub
+from .topology import Skeleton, Tree, tree_of
 
 
-def n_dof(mech: Mechanism) -> int:
+def structure(mech: AbstractMechanism) -> tuple[Linkage, Tree]:
+    """The mechanism's [`Linkage`][jaxcrank.physics.linkage.Linkage] and its
+    [`Tree`][jaxcrank.physics.topology.Tree] (the tree is cached by the linkage's names)."""
+    lk = mech.linkage()
+    return lk, tree_of(Skeleton.of(lk))
+
+
+def n_dof(mech: AbstractMechanism) -> int:
     """Number of generalized coordinates s (static)."""
-    return 2 * len(clearance_joints(mech))
+    return structure(mech)[1].n
 
 
-def state_size(mech: Mechanism) -> int:
-    """Length of the state vector (static): s, s', one memory per clearance joint, two works."""
-    return 2 * n_dof(mech) + len(clearance_joints(mech)) + 2
+def law_slices(mech: AbstractMechanism) -> dict[str, slice]:
+    """Where each cut joint's law state sits in the state vector (static)."""
+    return tree_law_slices(*structure(mech))
+
+
+def tree_law_slices(lk: Linkage, tree: Tree) -> dict[str, slice]:
+    """[`law_slices`][jaxcrank.physics.state.law_slices] of a linkage and its tree."""
+    start = 2 * tree.n
+    out = {}
+    for j in tree.cut:
+        k = len(lk.joints[j].state_names())
+        out[j] = slice(start, start + k)
+        start += k
+    return out
+
+
+def law_state_names(mech: AbstractMechanism) -> tuple[str, ...]:
+    """Names of the law state entries, ``<joint>.<entry>`` in state order (static)."""
+    lk, tree = structure(mech)
+    return tuple(f"{j}.{name}" for j in tree.cut for name in lk.joints[j].state_names())
+
+
+def state_size(mech: AbstractMechanism) -> int:
+    """Length of the state vector (static): s, s', the law states, two works."""
+    return 2 * n_dof(mech) + len(law_state_names(mech)) + 2
+
+
+def state_names(mech: AbstractMechanism) -> tuple[str, ...]:
+    """A name for every state entry (static): ``<body>.<coordinate>``, ``d/dt <body>.<coordinate>``,
+    ``<joint>.<law entry>``, ``driver_work``, ``dissipated_work``."""
+    _, tree = structure(mech)
+    coords = [f"{b}.{k}" for b, k in tree.coordinates]
+    return (*coords, *(f"d/dt {c}" for c in coords), *law_state_names(mech), "driver_work", "dissipated_work")
 
 
 class State(NamedTuple):
@@ -35,59 +74,100 @@ class State(NamedTuple):
 
     deviation: jax.Array  # s, generalized-coordinate deviations from the ideal mechanism (m, rad)
     deviation_rate: jax.Array  # s', m/s and rad/s
-    approach_memory: jax.Array  # approach-speed memory per clearance joint, m/s
-    driver_work: jax.Array  # work done by the driving moment, J
-    dissipated_work: jax.Array  # work dissipated by contact damping and friction, J
+    law_state: jax.Array  # the joint laws' states (law_state_names), SI
+    driver_work: jax.Array  # work done by the driver, J
+    dissipated_work: jax.Array  # work dissipated by the joint laws, J
 
 
-def unpack(mech: Mechanism, y: Float[ArrayLike, "*batch state"]) -> State:
-    """The scaled state ``y`` (shape (..., [`state_size`][jaxcrank.physics.state.state_size] )) as a
+def unpack(mech: AbstractMechanism, y: Float[ArrayLike, "*batch state"]) -> State:
+    """The scaled state ``y`` (shape (..., [`state_size`][jaxcrank.physics.state.state_size])) as a
     [`State`][jaxcrank.physics.state.State] in SI units."""
     phys = y * state_scales(mech)
-    n, k = n_dof(mech), len(clearance_joints(mech))
-    return State(phys[..., :n], phys[..., n : 2 * n], phys[..., 2 * n : 2 * n + k], phys[..., -2], phys[..., -1])
+    n = n_dof(mech)
+    return State(phys[..., :n], phys[..., n : 2 * n], phys[..., 2 * n : -2], phys[..., -2], phys[..., -1])
 
 
-def auxiliary(mech: Mechanism, y: Float[ArrayLike, "*batch state"]) -> Float[Array, "*batch aux"]:
-    """The state entries after the coordinates and their rates (approach-speed
-    memories, m/s, then driver and dissipated work, J), in SI units, shape
-    (..., state_size - 2 n_dof): what
-    [`state_from_eccentricities`][jaxcrank.physics.kinematics.state_from_eccentricities] takes as ``rest``."""
+def auxiliary(mech: AbstractMechanism, y: Float[ArrayLike, "*batch state"]) -> Float[Array, "*batch aux"]:
+    """The state entries after the coordinates and their rates (the law states, then
+    driver and dissipated work), in SI units."""
     return (y * state_scales(mech))[..., 2 * n_dof(mech) :]
 
 
-def length_scale(mech: Mechanism) -> Float[Array, ""]:
-    """Reference length of the deviations, m: the largest clearance (1 m if none)."""
-    clearances = [site.joint(mech).clearance for site in clearance_sites(mech)]
-    if not clearances:
-        return jnp.asarray(1.0)
-    return jax.lax.stop_gradient(jnp.max(jnp.stack(clearances)))
+def _largest(values):
+    """The largest of some scalars (a number when they all are)."""
+    out = values[0]
+    for v in values[1:]:
+        out = max(out, v) if known(out) and known(v) else jnp.maximum(out, v)
+    return out
 
 
-def state_scales(mech: Mechanism) -> Float[Array, " state"]:
+def tree_length_scale(lk: Linkage, tree: Tree):
+    """[`length_scale`][jaxcrank.physics.state.length_scale] of a linkage and its tree (a number where the
+    clearances are numbers)."""
+    clearances = [lk.joints[j].clearance for j in tree.cut]
+    return stop_gradient(_largest(clearances)) if clearances else 1.0
+
+
+def length_scale(mech: AbstractMechanism) -> Float[Array, ""]:
+    """Reference length of the deviations, m: the largest clearance of a cut joint (1 m if none)."""
+    return jnp.asarray(tree_length_scale(*structure(mech)), dtype=float)
+
+
+def body_sizes(lk: Linkage) -> dict[str, Array]:
+    """Each body's size, m: the largest distance between two of its points and its
+    centre of mass (stop-gradient; it only scales angles). A body with a single point
+    takes the largest size of the others."""
+    sizes = {}
+    for name, body in lk.bodies.items():
+        pts = [p.pair() for p in body.points.values()] + [body.centre_of_mass.pair()]
+        d = [sqrt(vdot(vsub(a, b), vsub(a, b))) for i, a in enumerate(pts) for b in pts[i + 1 :]]
+        sizes[name] = stop_gradient(_largest(d)) if d else 0.0
+    biggest = _largest(list(sizes.values()))
+    return {k: v if known(v) and v > 0.0 else jnp.where(v > 0.0, v, biggest) for k, v in sizes.items()}
+
+
+def reference_momentum(lk: Linkage) -> Array:
+    """Mass times length that scales the works, kg m: the driven body's size times the
+    largest mass jointed to it (the coupler's, in a slider-crank or four-bar)."""
+    driven = lk.driver.body
+    neighbours = {
+        s.body for c in lk.connections.values() if driven in {t.body for t in c.sites()} for s in c.sites()
+    } - {driven, GROUND}
+    masses = [lk.bodies[b].mass for b in sorted(neighbours)] or [lk.bodies[driven].mass]
+    return stop_gradient(mul(_largest(masses), body_sizes(lk)[driven]))
+
+
+def tree_state_scales(lk: Linkage, tree: Tree) -> list:
+    """[`state_scales`][jaxcrank.physics.state.state_scales] of a linkage and its tree, a list of scalars
+    (numbers where the linkage's values are)."""
+    ell = tree_length_scale(lk, tree)
+    omega = stop_gradient(lk.driver.speed_scale)
+    sizes = body_sizes(lk)
+    q = [div(ell, sizes[b]) if kind == "angle" else ell for b, kind in tree.coordinates]
+    laws = [s for j in tree.cut for s in lk.joints[j].state_scales(mul(ell, omega))]
+    work = mul(mul(mul(reference_momentum(lk), omega), ell), omega)
+    return [*q, *(mul(v, omega) for v in q), *laws, work, work]
+
+
+def state_scales(mech: AbstractMechanism) -> Float[Array, " state"]:
     """Physical value of one unit of each state entry.
 
-    Lengths in clearances l, rod angle in l / L2 rad, velocities in those times
-    omega, approach-speed memory in l omega m/s, work in m2 (L1 omega)(l omega) J.
-    The scales carry no gradient: they only condition the error control, so a
-    scalar ``rtol``/``atol`` means the same for every entry.
+    Lengths in clearances l, angles in l / (the body's size) rad, rates in those times
+    the driver's nominal speed omega, law states as each law declares (the approach-speed
+    memory in l omega m/s), work in (mass x length) omega x l omega J
+    ([`reference_momentum`][jaxcrank.physics.state.reference_momentum]). The scales carry no gradient: they only
+    condition the error control, so a scalar ``rtol``/``atol`` means the same for every
+    entry and every mechanism.
     """
-    ell = length_scale(mech)
-    sg = jax.lax.stop_gradient
-    omega, l2 = sg(mech.crank_speed), sg(mech.rod_length)
-    n = n_dof(mech)
-    if n == 4:
-        q = jnp.stack([ell, ell, ell / l2, ell])
-    elif n == 2:
-        q = jnp.stack([ell / l2, ell])
-    else:
-        q = jnp.zeros(0)
-    k = len(clearance_joints(mech))
-    memory = jnp.full((k,), ell * omega)
-    work = sg(mech.rod_mass * mech.crank_length * omega) * ell * omega
-    return jnp.concatenate([q, q * omega, memory, jnp.stack([work, work])])
+    return jnp.stack([jnp.asarray(v, dtype=float) for v in tree_state_scales(*structure(mech))])
 
 
-def initial_state(mech: Mechanism) -> Float[Array, " state"]:
-    """Pins centred and moving with the ideal mechanism; memories and work zero."""
-    return jnp.zeros(state_size(mech))
+def initial_state(mech: AbstractMechanism) -> Float[Array, " state"]:
+    """Pins centred and moving with the ideal mechanism; law states at their initial
+    values; works zero."""
+    lk, tree = structure(mech)
+    n = tree.n
+    laws = [lk.joints[j].initial_state() for j in tree.cut]
+    laws = jnp.concatenate(laws) if laws else jnp.zeros(0)
+    phys = jnp.concatenate([jnp.zeros(2 * n), laws, jnp.zeros(2)])
+    return phys / state_scales(mech)
