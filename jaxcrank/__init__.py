@@ -1,10 +1,12 @@
-"""jaxcrank: a differentiable simulator of slider-crank mechanisms with joint clearances.
+"""jaxcrank: a differentiable simulator of planar linkages with joint clearances.
 
 The public API is what ``__all__`` lists. The modules live in four layers, each
-importing only from the ones before it (one exception: the numerics' ``tracking`` and ``shooting``
-read the metric definitions of ``analysis.metrics``, which need the physics alone):
+importing only from the ones before it:
 
-- ``jaxcrank.physics``: ``params``, ``laws``, ``ideal``, ``model``, ``reference``;
+- ``jaxcrank.physics``: the description (``linkage``, ``presets``, ``joints``, ``laws``,
+  ``memory``, ``params``, ``parameters``), its structure (``topology``, ``closure``) and
+  the model (``state``, ``kinematics``, ``dynamics``, ``frame``, ``signals``, re-exported by
+  ``model``; ``ideal``, ``reference``);
 - ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``, ``steady``;
 - ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
   ``analysis.validation`` (``wall_impact``, ``memory_audit``);
@@ -42,18 +44,28 @@ from .numerics.solve import (  # noqa: E402
     solver_from_name,
 )
 from .numerics.steady import SteadyState, SteadyStateError, steady_state  # noqa: E402
-from .physics import ideal, laws, model, params  # noqa: E402
+from .physics import ideal, laws, model, params, presets  # noqa: E402
+from .physics.joints import JOINT_LAWS, Clearance, Ideal  # noqa: E402
 from .physics.laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
-from .physics.params import (  # noqa: E402
-    Contact,
-    Friction,
-    Joint,
-    Material,
-    Mechanism,
-    ParameterError,
-    paper,
-    with_clearance,
+from .physics.linkage import (  # noqa: E402
+    AbstractMechanism,
+    Body,
+    BodyVector,
+    ConstantSpeed,
+    Linkage,
+    Outputs,
+    Point,
+    Pose,
+    Prismatic,
+    Revolute,
+    Site,
+    SpeedProfile,
+    Torque,
 )
+from .physics.memory import MEMORY_LAWS, FrozenMemory  # noqa: E402
+from .physics.parameters import get_parameter, parameter_value, set_parameter, set_parameters  # noqa: E402
+from .physics.params import Contact, Friction, Material, ParameterError  # noqa: E402
+from .physics.presets import PRESETS, FourBar, SliderCrank, four_bar, paper, preset, with_clearance  # noqa: E402
 from .runs import config, sampling  # noqa: E402
 
 #: Short names of the modules that ``import jaxcrank`` does not load: each loads on first use.
@@ -90,14 +102,40 @@ __all__ = [
     "CONTACT_LAWS",
     "DEFAULTS",
     "FRICTION_LAWS",
+    "JOINT_LAWS",
+    "MEMORY_LAWS",
+    "PRESETS",
     "SOLVERS",
+    "AbstractMechanism",
+    "Body",
+    "BodyVector",
+    "Clearance",
+    "ConstantSpeed",
     "Contact",
     "CorruptFileError",
+    "FourBar",
     "Friction",
-    "Joint",
+    "FrozenMemory",
+    "Ideal",
+    "Linkage",
     "Material",
-    "Mechanism",
+    "Outputs",
     "ParameterError",
+    "Point",
+    "Pose",
+    "Prismatic",
+    "Revolute",
+    "Site",
+    "SliderCrank",
+    "SpeedProfile",
+    "Torque",
+    "four_bar",
+    "get_parameter",
+    "parameter_value",
+    "preset",
+    "presets",
+    "set_parameter",
+    "set_parameters",
     "Simulation",
     "SimulationError",
     "SolveOptions",

@@ -62,3 +62,56 @@ def is_stepsize_controller_tolerance(value) -> bool:
     except ImportError:  # pragma: no cover - layout of a future diffrax
         return type(value).__name__ == "_UseStepSizeTol"
     return isinstance(value, _UseStepSizeTol)
+
+
+def source_frames(source_info) -> list[tuple[str, int, str]]:
+    """The user frames (not JAX's own) of the Python stack that traced a jaxpr equation,
+    innermost first, each as (file path, line, function's qualified name); the
+    equation's ``source_info``.
+
+    JAX records the stack for its error messages and offers no public reader of it.
+    Private: ``jax._src.source_info_util.user_frames``. Falls back to no frames.
+    """
+    try:
+        from jax._src import source_info_util
+    except ImportError:  # pragma: no cover - layout of a future JAX
+        return []
+    try:
+        frames = source_info_util.user_frames(getattr(source_info, "traceback", None))
+        return [(f.file_name, int(f.start_line), f.function_name) for f in frames]
+    except (AttributeError, TypeError):  # pragma: no cover - layout of a future JAX
+        return []
+
+
+def named_scopes(source_info) -> tuple[str, ...]:
+    """The ``jax.named_scope`` names around a jaxpr equation, outermost first (within the
+    jaxpr that holds it; transformations such as ``jvp`` left out).
+
+    Private: ``jax._src.source_info_util.Scope``, the class of a name-stack entry made
+    by ``named_scope``. Falls back to no names.
+    """
+    try:
+        from jax._src.source_info_util import Scope
+    except ImportError:  # pragma: no cover - layout of a future JAX
+        return ()
+    stack = getattr(getattr(source_info, "name_stack", None), "stack", ())
+    return tuple(s.name for s in stack if isinstance(s, Scope))
+
+
+def equation_context(source_info):
+    """A context in which equations traced anew carry ``source_info`` (the stack and named
+    scopes of the equation they re-trace), as ``jax.core.eval_jaxpr`` re-traces a jaxpr, so
+    a jaxpr evaluated equation by equation keeps the provenance of its equations.
+
+    Private: ``jax._src.source_info_util.user_context`` and ``current_name_stack``. Falls
+    back to no context (the equations then carry the evaluator's stack).
+    """
+    try:
+        from jax._src import source_info_util
+    except ImportError:  # pragma: no cover - layout of a future JAX
+        return contextlib.nullcontext()
+    try:
+        stack = source_info_util.current_name_stack() + source_info.name_stack
+        return source_info_util.user_context(source_info.traceback, name_stack=stack)
+    except (AttributeError, TypeError):  # pragma: no cover - layout of a future JAX
+        return contextlib.nullcontext()

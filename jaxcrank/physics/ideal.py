@@ -1,13 +1,12 @@
-"""The ideal (zero-clearance) offset slider-crank in closed form.
+"""The ideal mechanism (every joint ideal) of any description, driven by its prescribed
+driver: motion, transmission angle, joint reactions and driving moment by inverse
+dynamics, and the contact margin.
 
-Coordinates follow model.md: crank angle theta1 (prescribed), rod centre of mass
-(x2, y2) at mid-length, rod angle theta2 from +x, slider position x3 on the line
-y = e. Positions are closed form; velocities and accelerations are their exact
-time derivatives (forward-mode autodiff of the closed form, no finite
-differences). Inverse dynamics gives the joint reactions and the driving moment.
-
-All functions take a [`Mechanism`][jaxcrank.physics.params.Mechanism] and a scalar time t (s);
-``jax.vmap`` over t for trajectories.
+Positions come from [`jaxcrank.physics.closure.ideal_poses`][] (dyads in closed form,
+Newton's method for the rest); velocities and accelerations are their exact time
+derivatives by forward-mode autodiff. Per-body arrays are in sorted body order. All
+functions take a mechanism and a scalar time t (s); ``jax.vmap`` over t for
+trajectories.
 """
 
 from __future__ import annotations
@@ -16,43 +15,39 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ..numerics import linalg
-from .laws import safe_norm
-from .params import Mechanism
+from .closure import ideal_poses
+from .frame import transmission_angle as _transmission_angle
+from .kinematics import centre_poses
+from .linkage import GROUND, AbstractMechanism, Prismatic, world_point
+from .safemath import cross, perp, safe_norm, solve_dense
+from .state import structure
 
 
-def crank_angle(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
-    """theta1(t) = theta1_0 + omega t, rad."""
-    return mech.initial_crank_angle + mech.crank_speed * t
+def _prescribed(mech: AbstractMechanism):
+    lk = mech.linkage()
+    if not lk.driver.prescribed:
+        raise ValueError(
+            f"the ideal motion in time needs a prescribed driver; a {lk.driver.name!r} driver's angle is not known in "
+            "advance (evaluate the ideal mechanism at a driver angle: jaxcrank.physics.closure.ideal_poses)"
+        )
+    return lk.driver
 
 
-def crank_pin(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, " 2"]:
-    """Crank pin centre P_B = L1 (cos theta1, sin theta1), m."""
-    th1 = crank_angle(mech, t)
-    return mech.crank_length * jnp.stack([jnp.cos(th1), jnp.sin(th1)])
+def driver_angle(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
+    """The prescribed driver angle phi(t), rad."""
+    return _prescribed(mech).angle(jnp.asarray(t, dtype=float))
 
 
-def positions(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, " 4"]:
-    """Ideal generalized positions Q = (x2 [m], y2 [m], theta2 [rad], x3 [m]).
-
-    ``sin theta2 = (e - L1 sin theta1) / L2``, ``x3 = L1 cos theta1 + L2 cos theta2``.
-    Requires L2 > L1 + |e| (checked by [`Mechanism`][jaxcrank.physics.params.Mechanism]).
-    """
-    th1 = crank_angle(mech, t)
-    l1, l2, e = mech.crank_length, mech.rod_length, mech.offset
-    s2 = (e - l1 * jnp.sin(th1)) / l2
-    th2 = jnp.arcsin(s2)
-    c2 = jnp.sqrt(1.0 - s2**2)
-    x2 = l1 * jnp.cos(th1) + 0.5 * l2 * c2
-    y2 = l1 * jnp.sin(th1) + 0.5 * l2 * s2
-    x3 = l1 * jnp.cos(th1) + l2 * c2
-    return jnp.stack([x2, y2, th2, x3])
+def positions(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
+    """Centre-of-mass poses (x [m], y [m], angle [rad]) of every body at time t."""
+    lk, tree = structure(mech)
+    return centre_poses(lk, tree, ideal_poses(mech, driver_angle(mech, t))).reshape(-1, 3)
 
 
 def kinematics(
-    mech: Mechanism, t: Float[ArrayLike, ""]
-) -> tuple[Float[Array, " 4"], Float[Array, " 4"], Float[Array, " 4"]]:
-    """Ideal (Q, dQ/dt, d2Q/dt2) at time t; units m, rad, and their per-second rates."""
+    mech: AbstractMechanism, t: Float[ArrayLike, ""]
+) -> tuple[Float[Array, "bodies 3"], Float[Array, "bodies 3"], Float[Array, "bodies 3"]]:
+    """Ideal (Q, dQ/dt, d2Q/dt2) at time t, per body; units m, rad and their per-second rates."""
     t = jnp.asarray(t, dtype=float)
 
     def vel(tt):
@@ -62,123 +57,103 @@ def kinematics(
     return q, qd, qdd
 
 
-def transmission_angle(rod_angle: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
-    """Transmission angle alpha = arccos(-sin theta2), rad (paper Eq. 17-18).
+def transmission_angle(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
+    """The ideal mechanism's transmission angle at time t, rad (zero when it defines none)."""
+    return _transmission_angle(mech, jnp.ravel(positions(mech, t)))
 
-    Equals ``arccos((L1 sin theta1 - e) / L2)`` for the ideal mechanism, and the
-    paper's Eq. 18 (rod end heights) with clearance, since
-    ``y_B - y_C = -L2 sin theta2``.
+
+def body_index(mech: AbstractMechanism, body: str) -> int:
+    """Position of ``body`` in the per-body arrays (sorted names)."""
+    return structure(mech)[1].bodies.index(body)
+
+
+def _local(lk, site):
+    return (lk.ground if site.body == GROUND else lk.bodies[site.body].points)[site.point].vector()
+
+
+def joint_reactions(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> tuple[dict[str, Array], Array]:
+    """The ideal mechanism's joint loads at time t by inverse dynamics (Newton-Euler for
+    every body; the loads of a one-degree-of-freedom linkage are determinate).
+
+    Returns:
+        ``(forces, torque)``: the force on each joint's pin side (the slider, for a
+        prismatic joint) from its hole side (the guide), N, (2,) by joint name; and the
+        driver's torque, N m.
     """
-    return jnp.arccos(jnp.clip(-jnp.sin(rod_angle), -1.0, 1.0))
+    lk, tree = structure(mech)
+    driver = _prescribed(mech)
+    q, qd, qdd = kinematics(mech, t)
+    frames = ideal_poses(mech, driver.angle(jnp.asarray(t, dtype=float)))
+    poses = {b: frames[i] for i, b in enumerate(tree.bodies)}
+    poses[GROUND] = jnp.zeros(3)
+    joints = tree.joints
+
+    def unknowns(x):
+        """(force on the pin side, moment on it) per joint, and the torque."""
+        out, k = {}, 0
+        for j in joints:
+            conn = lk.connections[j]
+            if isinstance(conn, Prismatic):
+                angle = poses[conn.guide.body][2] + conn.direction
+                normal = perp(jnp.stack([jnp.cos(angle), jnp.sin(angle)]))
+                out[j] = (x[k] * normal, x[k + 1])
+            else:
+                out[j] = (x[k : k + 2], jnp.zeros(()))
+            k += 2
+        return out, x[k]
+
+    def residual(x):
+        loads, torque = unknowns(x)
+        res = []
+        for i, b in enumerate(tree.bodies):
+            body = lk.bodies[b]
+            force = jnp.stack([0.0, -body.mass * lk.gravity])
+            moment = torque if b == driver.body else jnp.zeros(())
+            com = q[i, :2]
+            for j in joints:
+                hole, pin = lk.connections[j].sites()
+                f, m = loads[j]
+                for site, sign in ((pin, 1.0), (hole, -1.0)):
+                    if site.body == b:
+                        point = world_point(poses[b], _local(lk, site))
+                        force = force + sign * f
+                        moment = moment + sign * (cross(point - com, f) + m)
+            res += [
+                body.mass * qdd[i, 0] - force[0],
+                body.mass * qdd[i, 1] - force[1],
+                body.inertia * qdd[i, 2] - moment,
+            ]
+        return jnp.stack(res)
+
+    size = 2 * len(joints) + 1
+    zero = jnp.zeros(size)
+    a = jax.jacfwd(residual)(zero)
+    x = solve_dense(a, -residual(zero))
+    loads, torque = unknowns(x)
+    return {j: loads[j][0] for j in joints}, torque
 
 
-def mass_matrix(mech: Mechanism) -> Float[Array, " 4"]:
-    """Diagonal mass matrix of (x2, y2, theta2, x3): (m2, m2, J2, m3); kg, kg m^2."""
-    return jnp.stack([mech.rod_mass, mech.rod_mass, mech.rod_inertia, mech.slider_mass])
+def driving_moment(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
+    """The moment the driver needs to keep the ideal mechanism on its prescribed motion, N m."""
+    return joint_reactions(mech, t)[1]
 
 
-def rod_ends(mech: Mechanism, q: Float[ArrayLike, " 4"]) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
-    """Rod joint-end points (B_rod, C_rod) for generalized positions q, m."""
-    u2 = jnp.stack([jnp.cos(q[2]), jnp.sin(q[2])])
-    centre = q[:2]
-    half = 0.5 * mech.rod_length * u2
-    return centre - half, centre + half
-
-
-def _cross(r, f):
-    return r[0] * f[1] - r[1] * f[0]
-
-
-def reactions(
-    mech: Mechanism, q: Float[ArrayLike, " 4"], residual: Float[ArrayLike, " 4"], ideal_B: bool, ideal_C: bool
-) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
-    """Forces on the rod from the pins of the *ideal* joints, N.
-
-    ``residual = M q'' - F_applied`` (generalized, on (x2, y2, theta2, x3)) is what
-    the ideal joints must supply. A force F_B at rod end B contributes
-    ``(F_x, F_y, r_BG x F, 0)``; F_C at rod end C contributes
-    ``(F_x, F_y, r_CG x F, -F_x)`` (the slider feels -F_C; the guide takes y).
-    Solved in the least-squares sense (exact when the motion satisfies the
-    constraints). Returns ``(F_B, F_C)``, zeros for clearance joints.
-    """
-    b_end, c_end = rod_ends(mech, q)
-    centre = q[:2]
-    columns = []
-    if ideal_B:
-        r = b_end - centre
-        columns += [jnp.stack([1.0, 0.0, -r[1], 0.0]), jnp.stack([0.0, 1.0, r[0], 0.0])]
-    if ideal_C:
-        r = c_end - centre
-        columns += [jnp.stack([1.0, 0.0, -r[1], -1.0]), jnp.stack([0.0, 1.0, r[0], 0.0])]
-    zero = jnp.zeros(2)
-    if not columns:
-        return zero, zero
-    a = jnp.stack(columns, axis=1)
-    normal, rhs = a.T @ a, a.T @ residual
-    # plain-op linear algebra: a LAPACK call would take a solver loop that evaluates
-    # outputs (jaxcrank.numerics.tracking) off XLA's one-kernel path
-    lam = linalg.solve_2x2(normal, rhs) if len(columns) == 2 else linalg.inverse(normal) @ rhs
-    f_b = lam[:2] if ideal_B else zero
-    f_c = lam[-2:] if ideal_C else zero
-    return f_b, f_c
-
-
-def driving_moment_from_pin_force(
-    mech: Mechanism,
-    t: Float[ArrayLike, ""],
-    force_on_rod_at_B: Float[ArrayLike, " 2"],
-    contact_point: Float[ArrayLike, " 2"],
-) -> Float[Array, ""]:
-    """Driving moment that keeps the crank at constant speed, N m.
-
-    ``M = p x F_B + m1 g (L1/2) cos theta1``, where F_B is the force the crank pin
-    exerts on the rod (the crank feels -F_B) at point p (contact point on the pin).
-    J_crank theta1'' = 0 at constant speed.
-    """
-    th1 = crank_angle(mech, t)
-    return _cross(
-        contact_point, force_on_rod_at_B
-    ) + mech.crank_mass * mech.gravity * 0.5 * mech.crank_length * jnp.cos(th1)
-
-
-def rod_gravity(mech: Mechanism) -> Float[Array, " 4"]:
-    """Generalized gravity force on (x2, y2, theta2, x3), N and N m."""
-    return jnp.stack([0.0, -mech.rod_mass * mech.gravity, 0.0, 0.0])
-
-
-def driving_moment(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
-    """Ideal driving moment by inverse dynamics, N m (the paper's Fig. 8 ideal curve)."""
-    q, _, qdd = kinematics(mech, t)
-    residual = mass_matrix(mech) * qdd - rod_gravity(mech)
-    f_b, _ = reactions(mech, q, residual, True, True)
-    return driving_moment_from_pin_force(mech, t, f_b, crank_pin(mech, t))
-
-
-def joint_reactions(mech: Mechanism, t: Float[ArrayLike, ""]) -> tuple[Float[Array, " 2"], Float[Array, " 2"]]:
-    """Forces on the rod from the crank pin B and the slider pin C of the ideal
-    mechanism at time t, by inverse dynamics: ``(F_B, F_C)``, N (both joints ideal,
-    whatever ``mech``'s joints are)."""
-    q, _, qdd = kinematics(mech, t)
-    residual = mass_matrix(mech) * qdd - rod_gravity(mech)
-    return reactions(mech, q, residual, True, True)
-
-
-def contact_margin(mech: Mechanism, samples: int = 360, softness: float = 0.005) -> Float[Array, ""]:
+def contact_margin(mech: AbstractMechanism, samples: int = 360, softness: float = 0.005) -> Float[Array, ""]:
     """How far the ideal mechanism's joint loads stay from zero over one revolution:
-    ``min_j softmin_t |F_j(t)| / rms_t |F_j(t)|`` over the joints j = B, C
-    ([`joint_reactions`][jaxcrank.physics.ideal.joint_reactions]), dimensionless, in [0, 1].
+    ``min_j softmin_t |F_j(t)| / rms_t |F_j(t)|`` over the joints j with clearance (all
+    joints where none has) ([`joint_reactions`][jaxcrank.physics.ideal.joint_reactions]), dimensionless, in [0, 1].
 
     A pin in a clearance joint stays pressed against its bearing while the load through
     the joint keeps its magnitude; where |F_j| passes near zero the load reverses and the
     pin crosses the clearance, the contact-loss that starts impacts. 0: some load
-    reverses through zero; near 1: both loads are nearly constant in magnitude.
+    reverses through zero; near 1: every load is nearly constant in magnitude.
 
     Args:
         mech: the mechanism (its clearances, laws and friction are not used).
-        samples: equally spaced times over one crank period (>= 8).
+        samples: equally spaced times over one revolution (>= 8).
         softness: width of the soft minimum over the samples,
-            ``-s ln mean exp(-x / s)`` with s = ``softness`` (> 0; it exceeds the sampled minimum by at most s ln
-            ``samples`` of the sampled minimum): smooth in the design, so it can be
+            ``-s ln mean exp(-x / s)`` with s = ``softness`` (> 0; it exceeds the sampled
+            minimum by at most s ln ``samples``): smooth in the design, so it can be
             differentiated.
 
     Raises:
@@ -186,11 +161,16 @@ def contact_margin(mech: Mechanism, samples: int = 360, softness: float = 0.005)
     """
     if int(samples) < 8 or not softness > 0:
         raise ValueError(f"samples = {samples} must be >= 8 and softness = {softness} > 0")
+    _, tree = structure(mech)
+    joints = tree.cut or tree.joints
     ts = mech.period * jnp.arange(int(samples), dtype=float) / int(samples)
-    f_b, f_c = jax.vmap(lambda t: joint_reactions(mech, t))(ts)
+    forces = jax.vmap(lambda t: joint_reactions(mech, t)[0])(ts)
     margins = []
-    for f in (f_b, f_c):
-        size = safe_norm(f)
+    for j in joints:
+        size = safe_norm(forces[j])
         x = size / jnp.sqrt(jnp.mean(size**2))
         margins.append(-softness * jax.scipy.special.logsumexp(-x / softness, b=1.0 / x.shape[0]))
-    return jnp.minimum(*margins)
+    out = margins[0]
+    for m in margins[1:]:
+        out = jnp.minimum(out, m)
+    return out
