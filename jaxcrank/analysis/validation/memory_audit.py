@@ -2,16 +2,17 @@
 the approach speed the damping uses against the true normal speed just before onset.
 
 The contact laws divide by ``delta_dot_minus``, the normal speed at the onset of an
-impact (model.md); jaxcrank carries it as a memory state per clearance joint
-([`jaxcrank.physics.model.memory_tracking`][jaxcrank.physics.memory.memory_tracking]).
+impact (model.md); every dry clearance joint ([`Clearance`][jaxcrank.physics.joints.Clearance]) carries it as the
+first entry of its memory law's state ([`jaxcrank.physics.memory`][]).
 [`onsets`][jaxcrank.analysis.validation.memory_audit.onsets] solves a run as
 [`jaxcrank.simulate`][jaxcrank.numerics.solve.simulate] does (same solver, controller and tolerances), keeps every
 accepted step and the solver's dense output, finds each step in which a penetration
-delta crosses zero upwards, locates the crossing by bisection on the dense output,
-and there compares
+delta of a clearance joint crosses zero upwards, locates the crossing by bisection on the
+dense output, and there compares
 
-* ``used``: ``max(memory, contact.min_approach_speed)``, the approach speed the
-  damping divides by during the impact (the memory is frozen from onset on), with
+* ``used``: the approach speed the joint's memory law gives the contact law
+  ([`approach_speed`][jaxcrank.physics.memory.AbstractMemoryLaw.approach_speed]: the memory floored at its
+  ``min_approach_speed``), which the memory holds through the impact, with
 * ``true``: delta_dot at the crossing, the true normal speed just before onset.
 """
 
@@ -25,9 +26,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from ...numerics import solve
-from ...physics import laws, model
-from ...physics.params import Mechanism
+from ...physics import model
+from ...physics.joints import Clearance
+from ...physics.linkage import AbstractMechanism
+from ...physics.safemath import safe_norm
 from .events import crossings, dense_solve
 
 
@@ -35,11 +37,11 @@ class Onsets(NamedTuple):
     """The contact onsets of a run, one entry per onset, sorted by time (numpy arrays).
 
     Attributes:
-        joint: joint name per onset ("B" or "C").
+        joint: joint name per onset (a clearance joint of the mechanism).
         t: onset time, s.
         true: delta_dot at onset, m/s (the true approach speed).
-        used: the approach speed the damping uses, m/s (memory floored at
-            ``contact.min_approach_speed``).
+        used: the approach speed the damping uses, m/s (the joint's memory floored at
+            its memory law's ``min_approach_speed``).
         since_separation: time since the same joint's previous separation, s
             (inf for its first onset).
         max_gap: the largest gap -delta, m, at the solver's steps since that
@@ -92,34 +94,63 @@ class Onsets(NamedTuple):
         return out
 
 
-def _joint_state(mech: Mechanism, t, y):
-    """(penetration, penetration rate, memory) per clearance joint at (t, y), shape (k,) each
-    (rate 0 where the pin is centred)."""
-    d, d_rate = model.joint_eccentricities(mech, t, y)
-    clearance = jnp.stack([site.joint(mech).clearance for site in model.clearance_sites(mech)])
-    eps = laws.safe_norm(d)
-    rate = jnp.sum(d * d_rate, axis=-1) / jnp.where(eps > 0.0, eps, 1.0)
-    return eps - clearance, rate, model.unpack(mech, y).approach_memory
+def audited_joints(mech: AbstractMechanism) -> tuple[str, ...]:
+    """Names of the mechanism's dry clearance joints (cut joints whose law is a
+    [`Clearance`][jaxcrank.physics.joints.Clearance]), in state order (static)."""
+    lk, tree = model.structure(mech)
+    return tuple(j for j in tree.cut if isinstance(lk.joints[j], Clearance))
+
+
+def _joint_state(mech: AbstractMechanism, t, y):
+    """(penetration [m], penetration rate [m/s], approach speed used [m/s]) per audited
+    joint at (t, y), shape (k,) each (rate 0 where the pin is centred)."""
+    lk, tree = model.structure(mech)
+    d_all, d_rate_all = model.joint_eccentricities(mech, t, y)
+    law_state = model.unpack(mech, y).law_state
+    slices = model.law_slices(mech)
+    offset = 2 * tree.n
+    pen, rate, used = [], [], []
+    for j in audited_joints(mech):
+        k = tree.cut.index(j)
+        d, d_rate = d_all[k], d_rate_all[k]
+        law = lk.joints[j]
+        eps = safe_norm(d)
+        pen.append(eps - law.clearance)
+        rate.append(jnp.dot(d, d_rate) / jnp.where(eps > 0.0, eps, 1.0))
+        sl = slices[j]
+        used.append(law.memory.approach_speed(law_state[..., sl.start - offset : sl.stop - offset]))
+    if not pen:
+        z = jnp.zeros(0)
+        return z, z, z
+    return jnp.stack(pen), jnp.stack(rate), jnp.stack(used)
 
 
 def onsets(
-    mech: Mechanism,
+    mech: AbstractMechanism,
     t1: Float[ArrayLike, ""],
     *,
     t0: Float[ArrayLike, ""] = 0.0,
     y0: Float[ArrayLike, " state"] | None = None,
-    options=solve.DEFAULTS,
+    options=None,
     max_steps=200_000,
     bisections=60,
 ) -> Onsets:
-    """Every contact onset of the run of ``mech`` from ``t0`` to ``t1`` (s) with the
-    numerical settings ``options`` ([`jaxcrank.SolveOptions`][jaxcrank.numerics.solve.SolveOptions]; the step budget
-    is ``max_steps``, which also sizes the stored steps). Returns
-    [`Onsets`][jaxcrank.analysis.validation.memory_audit.Onsets] ."""
+    """Every contact onset of the mechanism's clearance joints in the run of ``mech`` from
+    ``t0`` to ``t1`` (s) with the numerical settings ``options``
+    ([`jaxcrank.SolveOptions`][jaxcrank.numerics.solve.SolveOptions], default: the defaults of
+    [`jaxcrank.simulate`][jaxcrank.numerics.solve.simulate]; the step budget is ``max_steps``, which also sizes
+    the stored steps). Returns [`Onsets`][jaxcrank.analysis.validation.memory_audit.Onsets].
+
+    Raises:
+        SimulationError: the solve did not finish.
+    """
+    from ...numerics import solve  # the solver settings; imported here, the rig itself needs only the physics
+
+    options = solve.DEFAULTS if options is None else options
     solver = options.solver
     controller = solve.step_size_controller(solver, options.rtol, options.atol)
     y0 = model.initial_state(mech) if y0 is None else y0
-    t0_, t1_ = jnp.asarray(t0, float), jnp.asarray(t1, float)
+    t0_, t1_ = jnp.asarray(t0, dtype=float), jnp.asarray(t1, dtype=float)
     sol = dense_solve(model.vector_field, solver, t0_, t1_, options.dt0, y0, mech, controller, max_steps, steps=True)
     if sol.result != diffrax.RESULTS.successful:
         raise solve.SimulationError(f"audit solve failed: {sol.result}")
@@ -129,7 +160,7 @@ def onsets(
     state_at = jax.jit(jax.vmap(lambda t: _joint_state(mech, t, sol.evaluate(t))))
     pen, _, _ = jax.jit(jax.vmap(lambda t, y: _joint_state(mech, t, y)))(ts, ys)
     pen = np.asarray(pen)
-    joints = model.clearance_joints(mech)
+    joints = audited_joints(mech)
     records = []
     for j, name in enumerate(joints):
         p = pen[:, j]
@@ -138,7 +169,7 @@ def onsets(
         if up.size == 0:
             continue
         _, hi = crossings(lambda t, j=j: np.asarray(state_at(jnp.asarray(t))[0][:, j]), ts, p, bisections=bisections)
-        _, rate, memory = state_at(jnp.asarray(hi))
+        _, rate, used = state_at(jnp.asarray(hi))
         # separation times: located to step precision (enough for "time since")
         sep_t = 0.5 * (ts[down] + ts[down + 1])
         for k, t_on in enumerate(hi):
@@ -150,7 +181,7 @@ def onsets(
                     name,
                     t_on,
                     float(rate[k, j]),
-                    max(float(memory[k, j]), float(mech.contact.min_approach_speed)),
+                    float(used[k, j]),
                     t_on - prev[-1] if prev.size else np.inf,
                     gap,
                 )
