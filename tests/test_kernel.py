@@ -1,7 +1,7 @@
 """The ensemble kernel (jaxcrank.numerics.kernel): its generated vector field equals the
-JAX model's, its metrics equal the JAX path's per design over windows short enough to
-precede impact chaos, failing designs get the JAX path's named statuses without
-touching their batch mates, and a batch is deterministic."""
+JAX model's (the paper's slider-crank and the four-bar), its metrics equal the JAX path's
+per design over windows short enough to precede impact chaos, failing designs get the JAX
+path's named statuses without touching their batch mates, and a batch is deterministic."""
 
 import dataclasses
 import itertools
@@ -14,34 +14,38 @@ import numpy as np
 import pytest
 
 import jaxcrank as jc
-from jaxcrank import metrics, sweep
+from jaxcrank import sweep
 from jaxcrank.numerics import solve as solve_module
-from jaxcrank.numerics.kernel import build, codegen, engine, gpu, source
+from jaxcrank.numerics.kernel import build, engine, gpu, source
 from jaxcrank.physics import laws, model
-from jaxcrank.physics.params import Joint
 
 pytestmark = pytest.mark.skipif(not engine.available(), reason="no C compiler")
 
-LAYOUTS = ("BC", "C", "B", "")  # clearance joints: both, ideal B, ideal C, both ideal
+# clearance joints: both, ideal B, ideal C (a loop of ideal joints alone has no tree to
+# integrate: the model refuses it, so "both ideal" is no layout any more)
+LAYOUTS = ("BC", "C", "B")
 CONTACT = tuple(laws.CONTACT_LAWS.values())
 FRICTION = tuple(laws.FRICTION_LAWS.values())
 # every contact law, friction law and joint layout at least once (the default suite);
 # the whole product is the slow test
-COVERING = [(law, FRICTION[i % 2], LAYOUTS[i % 4]) for i, law in enumerate(CONTACT)]
+COVERING = [(law, FRICTION[i % 2], LAYOUTS[i % len(LAYOUTS)]) for i, law in enumerate(CONTACT)]
 FULL = list(itertools.product(CONTACT, FRICTION, LAYOUTS))
 
 
-def mechanism(contact_law, friction_law, clearances: str):
-    """The paper mechanism with the given laws; joints not named in ``clearances`` ideal."""
-    mech = jc.paper()
-    mech = eqx.tree_at(lambda m: m.contact.law, mech, contact_law())
-    mech = eqx.tree_at(lambda m: m.friction.law, mech, friction_law())
+def mechanism(contact_law, friction_law, clearances: str, preset=jc.paper):
+    """A preset (the paper's slider-crank or the four-bar, both with clearance at B and C)
+    with the given laws at B and C; those of B and C not named in ``clearances`` ideal."""
+    mech = preset()
+    joints = dict(mech.joints)
     for name in "BC":
-        if name not in clearances:
-            j = getattr(mech, f"joint_{name}")
-            ideal = Joint(j.hole_radius, j.pin_radius, True)
-            mech = eqx.tree_at(lambda m, n=name: getattr(m, f"joint_{n}"), mech, ideal)
-    return mech
+        law = joints[name]
+        if name in clearances:
+            contact = eqx.tree_at(lambda c: c.law, law.contact, contact_law())
+            friction = eqx.tree_at(lambda f: f.law, law.friction, friction_law())
+            joints[name] = dataclasses.replace(law, contact=contact, friction=friction)
+        else:
+            joints[name] = jc.Ideal()
+    return dataclasses.replace(mech, joints=joints)
 
 
 def random_states(mech, n, seed):
@@ -54,9 +58,11 @@ def random_states(mech, n, seed):
     return rng.uniform(0.0, 0.4, n), np.ascontiguousarray(y)
 
 
-def assert_field_equal(structures, n=2000):
+def assert_field_equal(structures, n=2000, preset=jc.paper, per_entry=False):
+    """``per_entry``: compare each component in absolute scaled units against 1e-12 of the
+    largest |rate| of its state entry over the n states, instead of relative to itself."""
     for k, (contact_law, friction_law, layout) in enumerate(structures):
-        mech = mechanism(contact_law, friction_law, layout)
+        mech = mechanism(contact_law, friction_law, layout, preset)
         st = source.structure(mech)  # every parameter a run-time input
         lib = build.compile_source(source.field_source(st))
         ts, ys = random_states(mech, n, seed=k)
@@ -71,9 +77,10 @@ def assert_field_equal(structures, n=2000):
         field = lambda t, y, m=mech: model.vector_field(t, y, m)  # noqa: E731
         batched = np.asarray(jax.vmap(field)(ts, ys))
         single = np.asarray(jax.lax.map(lambda a, f=field: f(a[0], a[1:]), np.c_[ts, ys]))
-        label = f"{contact_law.__name__}, {friction_law.__name__}, clearance at {layout or 'neither'}"
+        label = f"{mech.name}: {contact_law.__name__}, {friction_law.__name__}, clearance at {layout or 'neither'}"
         assert np.all(np.isfinite(batched)), label
-        bad = (np.abs(out - batched) > 1e-12 * np.abs(batched)) & (np.abs(out - single) > 1e-12 * np.abs(single))
+        scale = np.max(np.abs(batched), axis=0) if per_entry else np.abs(batched)
+        bad = (np.abs(out - batched) > 1e-12 * scale) & (np.abs(out - single) > 1e-12 * scale)
         assert not bad.any(), (label, np.argwhere(bad)[:5], out[bad][:5], batched[bad][:5], single[bad][:5])
         lanes = np.zeros_like(ys)  # the same code on vectors of four designs: the same bits
         lib.lib.jk_field_batch_v(n, params, ts, ys, lanes)
@@ -89,8 +96,21 @@ def test_generated_field_equals_the_model_for_every_law_and_layout():
     assert_field_equal(COVERING)
 
 
+def test_generated_field_equals_the_model_on_the_four_bar():
+    """The same on the four-bar (every layout, three contact laws, both friction laws: the
+    laws' code is the paper's), each component within 1e-12 of its state entry's largest
+    |rate| over the 2000 states (absolute, scaled units; measured over the six structures
+    of the covering set: at most 6.8e-16). Relative to itself a component can be a small
+    difference of large terms at states deep in contact (the approach-speed memory's rate,
+    the normal acceleration, is one), where XLA's own batched and one-state programs
+    disagree by up to 1e-8 relative: measured, 2 of 84 000 components are above 1e-12
+    relative to themselves (1.05e-12 and 3.6e-11), the rounding the paper's slow
+    whole-product test records too."""
+    assert_field_equal(COVERING[:3], preset=jc.four_bar, per_entry=True)
+
+
 @pytest.mark.slow
-@pytest.mark.long  # 48 structures, one compilation each (minutes)
+@pytest.mark.long  # 36 structures, one compilation each (minutes)
 @pytest.mark.xfail(
     strict=False,
     reason="measured: 2 of 48 structures (Flores / smooth ramp / ideal B; Lankarani-Nikravesh / smooth ramp / "
@@ -100,11 +120,6 @@ def test_generated_field_equals_the_model_for_every_law_and_layout():
 )
 def test_generated_field_equals_the_model_for_every_combination():
     assert_field_equal(FULL)
-
-
-def test_codegen_names_an_unsupported_primitive():
-    with pytest.raises(codegen.UnsupportedPrimitive, match="cumsum"):
-        codegen.emit_function("f", lambda x: (jax.numpy.cumsum(x),), [("x", (3,))], ["out"])
 
 
 NAMES = ["clearance_B", "clearance_C", "contact.restitution"]
@@ -126,34 +141,40 @@ def test_free_flight_metrics_equal_the_jax_path_per_design():
     assert np.all(got.status == 0) and list(ref["status"]) == ["ok"] * 3
     assert np.all(ref["peak_contact_force_B_N"] == 0) and np.all(ref["peak_contact_force_C_N"] == 0)
     np.testing.assert_array_equal(got.steps, ref["steps"])
-    for j, key in enumerate(metrics.METRICS):
+    for j, key in enumerate(sweep.metric_names(jc.paper())):
         np.testing.assert_allclose(got.metrics[:, j], ref[key], rtol=1e-9, atol=1e-300, err_msg=key)
 
 
 def test_metrics_through_the_first_impacts_agree_within_the_solve_error():
     """Over 2 ms (through the first impacts at B and C: windows short enough to precede
     chaos), each metric's largest relative difference between the kernel and the JAX
-    path, over the designs, is at most 3 times the JAX path's own solve error (its
-    difference from a solve at rtol = atol = 1e-8): the engines agree within the solve
-    tolerance. Peaks are taken at step ends, so two step sequences see an impact's peak
-    at different instants."""
+    path, over the designs, is at most 3 times the JAX path's own uncertainty: the larger
+    of its solve error (its difference from a solve at rtol = atol = 1e-8) and its
+    rounding spread (its differences from the same solve of the designs perturbed by
+    +-1e-14 relative). The impacts amplify rounding: measured at the fourth design, a
+    1e-14 perturbation moves the JAX path's RMS transmission-angle error by up to 5e-4
+    relative, more than its solve error (3e-5), and the kernel rounds differently from
+    XLA. Peaks are taken at step ends, so two step sequences see an impact's peak at
+    different instants."""
     settings = sweep.Settings(revolutions=0.02, samples_per_revolution=3600, metrics_from_revolution=0.0)
     tight = dataclasses.replace(settings, options=settings.options.replace(rtol=1e-8, atol=1e-8))
     ref, exact = jax_path(NAMES, DESIGNS, settings), jax_path(NAMES, DESIGNS, tight)
+    nudged = [jax_path(NAMES, DESIGNS * (1.0 + e), settings) for e in (1e-14, -1e-14)]
     got = engine.solve(jc.paper(), NAMES, DESIGNS, settings)
     assert np.all(got.status == 0) and list(ref["status"]) == ["ok"] * len(DESIGNS)
     assert np.all(ref["peak_contact_force_B_N"] > 0) and np.all(ref["peak_contact_force_C_N"] > 0)
-    for j, key in enumerate(metrics.METRICS):
+    for j, key in enumerate(sweep.metric_names(jc.paper())):
         scale = np.abs(ref[key])
         kernel = np.max(np.abs(got.metrics[:, j] - ref[key]) / scale)
         solve_error = np.max(np.abs(exact[key] - ref[key]) / scale)
-        assert kernel <= 3.0 * solve_error + 1e-9, (key, kernel, solve_error)
+        spread = max(np.max(np.abs(t[key] - ref[key]) / scale) for t in nudged)
+        assert kernel <= 3.0 * max(solve_error, spread) + 1e-9, (key, kernel, solve_error, spread)
 
 
 def test_step_budget_gives_max_steps_and_the_others_finish():
     """A design whose 0.1 ns memory time makes it too stiff for a 20 000-step budget
     stops with ``max_steps`` in both engines; its batch mates get the numbers they get alone."""
-    names = ["clearance_C", "contact.memory_time"]
+    names = ["clearance_C", "memory.memory_time"]
     designs = np.array([[2.5e-4, 1e-5], [2.5e-4, 1e-10], [3e-4, 1e-5]])
     settings = sweep.Settings(
         revolutions=0.03,
@@ -176,7 +197,7 @@ def test_non_finite_state_gives_non_finite_and_the_others_finish():
     gives it; a NaN parameter never takes a step (``max_steps``, as on the JAX path);
     the design between them is unaffected."""
     mech = jc.paper()
-    bad = eqx.tree_at(lambda m: m.contact.restitution, mech, float("nan"))
+    bad = jc.set_parameter(mech, "contact.restitution", float("nan"))
     size = model.state_size(mech)
     y0 = np.zeros((3, size))
     y0[0, -1] = np.inf
@@ -229,7 +250,7 @@ def test_kernel_refuses_other_solvers():
         )
 
 
-SWEEP_NAMES = ["clearance_C", "contact.memory_time"]
+SWEEP_NAMES = ["clearance_C", "memory.memory_time"]
 # design 1: too stiff for its step budget; design 3: clearance larger than the hole (invalid)
 SWEEP_DESIGNS = np.array([[2.5e-4, 1e-5], [2.5e-4, 1e-10], [3e-4, 1e-5], [9e-3, 1e-5], [1.5e-4, 2e-5]])
 SWEEP_SHORT = sweep.Settings(
@@ -248,7 +269,7 @@ def test_kernel_sweep_writes_the_table_and_resumes(tmp_path, monkeypatch):
 
     whole = sweep.run(jc.paper(), SWEEP_NAMES, SWEEP_DESIGNS, SWEEP_SHORT, chunk=2, progress=False, engine="kernel")
     assert list(whole["status"]) == ["ok", "max_steps", "ok", "invalid", "ok"]
-    assert set(whole) == set(sweep.columns(SWEEP_NAMES))
+    assert set(whole) == set(sweep.columns(jc.paper(), SWEEP_NAMES))
     real, calls = engines.kernel_evaluate, {"n": 0}
 
     def dies_after_first_chunk(*a):

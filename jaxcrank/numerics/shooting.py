@@ -20,8 +20,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..physics import model
-from ..physics.params import Mechanism, ParameterError
+from ..physics import model, signals
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.params import ParameterError
 from .solve import Simulation, SolveOptions, simulate
 
 #: the solve settings of :func:`steady_state`: tight tolerances keep the noise of the
@@ -58,7 +59,50 @@ def section_times(mech, revolutions):
 
 
 def dynamic_size(mech):
-    return 2 * model.n_dof(mech) + len(model.clearance_joints(mech))
+    """Entries of the state that feed back (all but the two works)."""
+    return model.state_size(mech) - 2
+
+
+def check_periodic_driver(mech) -> None:
+    """Raise a [`ParameterError`][jaxcrank.physics.params.ParameterError] unless the driver prescribes a motion
+    periodic in time with ``mech.period`` (a steady state needs a Poincare section)."""
+    driver = mech.linkage().driver
+    if not driver.prescribed:
+        raise ParameterError(
+            f"the steady state needs a driver that prescribes a periodic motion (constant speed or a speed "
+            f"profile); this mechanism's {driver.name!r} driver does not"
+        )
+
+
+def check_arguments(
+    settle_revolutions,
+    max_period,
+    recurrence_tol,
+    newton_tol,
+    max_newton,
+    statistics_revolutions,
+    batch_revolutions,
+    samples_per_revolution,
+):
+    """Raise [`ParameterError`][jaxcrank.physics.params.ParameterError] naming the first argument of
+    [`jaxcrank.numerics.steady.steady_state`][] out of its range."""
+    for name, value, low in (
+        ("settle_revolutions", settle_revolutions, 1),
+        ("max_period", max_period, 1),
+        ("max_newton", max_newton, 0),
+        ("batch_revolutions", batch_revolutions, 1),
+        ("samples_per_revolution", samples_per_revolution, 2),
+    ):
+        if not (isinstance(value, (int, np.integer)) and value >= low):
+            raise ParameterError(f"{name} = {value!r} must be an integer >= {low}")
+    if not (isinstance(statistics_revolutions, (int, np.integer)) and statistics_revolutions >= 2 * batch_revolutions):
+        raise ParameterError(
+            f"statistics_revolutions = {statistics_revolutions!r} must be an integer >= 2 * batch_revolutions "
+            f"= {2 * batch_revolutions} (two batches at least)"
+        )
+    for name, value in (("recurrence_tol", recurrence_tol), ("newton_tol", newton_tol)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ParameterError(f"{name} = {value!r} must be a finite number > 0 (scaled units: clearances)")
 
 
 def full(z):
@@ -260,10 +304,6 @@ def not_periodic(mech, z, options, statistics_revolutions, batch_revolutions, sa
         v = v / norm
         per_rev.append({k: float(val) for k, val in metrics_.items() if k != "window_start_s"})
     lyapunov = float(np.mean(logs)) / float(mech.period)
-    from ..analysis.metrics import METRICS
-
-    statistics = {
-        key: batch_means([r[key] for r in per_rev], batch_revolutions, METRICS.get(key, ("max",))[0] == "rms")
-        for key in per_rev[0]
-    }
+    rms = set(signals.rms_metrics(mech))
+    statistics = {key: batch_means([r[key] for r in per_rev], batch_revolutions, key in rms) for key in per_rev[0]}
     return jac, RESULTS.successful, lyapunov, statistics, z

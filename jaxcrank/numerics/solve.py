@@ -25,7 +25,8 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from .. import _private
 from ..physics import model
-from ..physics.params import Mechanism, ParameterError
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.params import ParameterError
 from . import tracking
 from .linalg import DenseInverse
 from .rosenbrock import Rodas4
@@ -232,7 +233,7 @@ def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, prog
     if tracked:
         tracked_metrics = {
             "window_start_s": jnp.asarray(metrics_start, dtype=float),
-            **tracking.finish(sol.solver_state[1]),
+            **tracking.finish(sol.solver_state[1], mech),
         }
     return Simulation(
         mech,
@@ -246,8 +247,8 @@ def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, prog
 
 
 def sample_times(mech: Mechanism, t1=None, n_samples=None, t0=0.0):
-    """Equally spaced sample times (equal crank-angle steps), s. Defaults: four
-    revolutions (0.4 s at 600 rpm), one sample every 0.1 degree of crank angle."""
+    """Equally spaced sample times (equal steps of the driver's nominal angle), s.
+    Defaults: four revolutions (0.4 s at 600 rpm), one sample every 0.1 degree."""
     period = float(mech.period)
     t1 = 4.0 * period if t1 is None else float(t1)
     if n_samples is None:
@@ -285,7 +286,7 @@ def simulate(
     save_samples=True,
     save_ts: Float[ArrayLike, " m"] | None = None,
 ) -> Simulation:
-    """Simulate the clearance mechanism from pins-centred rest relative to the
+    """Simulate a mechanism with clearance joints from pins-centred rest relative to the
     ideal motion (or from ``y0``).
 
     Args:
@@ -293,7 +294,8 @@ def simulate(
         t1: end time, s (default four revolutions). Ignored when ``ts`` is given.
         ts: sample times, s, increasing, starting at the initial time. Without it,
             ``n_samples`` equally spaced times from 0 to ``t1``.
-        n_samples: number of equally spaced samples (default one per 0.1 deg of crank).
+        n_samples: number of equally spaced samples (default one per 0.1 deg of the
+            driven body's nominal rotation).
         y0: scaled state at ``ts[0]`` (default
             [`jaxcrank.physics.model.initial_state`][jaxcrank.physics.state.initial_state] ,
             pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.

@@ -69,7 +69,8 @@ import numpy as np
 from jaxtyping import Array, Bool, Complex, Float
 
 from ..physics import model
-from ..physics.params import Mechanism, ParameterError
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.params import ParameterError
 from . import shooting
 from .shooting import RESULTS, STEADY_DEFAULTS, period_solve
 from .solve import Simulation, SolveOptions, simulate
@@ -94,7 +95,8 @@ class SteadyState(eqx.Module):
         section_state: y*, the scaled state at t = 0 (crank at its initial angle) that
             starts the orbit; works zero. Not periodic: the last section point.
         monodromy: M = dPhi^k/dy at y* on the state entries before the works, shape
-            (m, m), m = 2 n_dof + joints (not periodic: the one-revolution map's).
+            (m, m), m = 2 n_dof + the joint laws' state entries (not periodic: the
+            one-revolution map's).
         active: which of those m entries form the dynamic subspace (bool, (m,)).
         floquet_multipliers: eigenvalues of M on the dynamic subspace, complex, largest
             modulus first (per period of k revolutions; not periodic: finite-time, per
@@ -152,63 +154,46 @@ class SteadyState(eqx.Module):
 
 def _neutral_names(mech, active):
     n = 2 * model.n_dof(mech)
-    names = [f"approach_memory_{j}" for i, j in enumerate(model.clearance_joints(mech)) if not active[n + i]]
+    names = [name for i, name in enumerate(model.law_state_names(mech)) if not active[n + i]]
     return tuple(names) + ("driver_work", "dissipated_work")
 
 
 def carry_state(old: Mechanism, y: Float[Array, " state"], new: Mechanism) -> Float[Array, " state"]:
-    """The scaled section state (t = 0) of ``old`` carried over to the design ``new``
-    (clearance at B and C in both): each pin keeps its place and motion in its bearing
-    relative to the clearance (eccentricities and their rates scaled by the ratio of the
-    clearances, so a pin in contact stays in contact at nearly the same penetration);
-    approach-speed memories (m/s) and works (J) kept in SI units."""
-    d, dd = model.eccentricities(old, 0.0, y)
-    ratio = jnp.stack([new.joint_B.clearance / old.joint_B.clearance, new.joint_C.clearance / old.joint_C.clearance])
-    return model.state_from_eccentricities(new, 0.0, d * ratio[:, None], dd * ratio[:, None], model.auxiliary(old, y))
+    """The scaled section state (t = 0) of ``old`` carried over to the design ``new`` (the
+    same joints with clearance in both): each pin keeps its place and motion in its
+    bearing relative to the clearance (eccentricities and their rates scaled by the ratio
+    of the clearances, so a pin in contact stays in contact at nearly the same
+    penetration); law states (m/s, s) and works (J) kept in SI units.
+
+    Raises:
+        ValueError: when the clearance joints' eccentricities do not determine the
+            coordinates (see [`jaxcrank.physics.kinematics.state_from_eccentricities`][])."""
+    d, dd = model.joint_eccentricities(old, 0.0, y)
+    lk_old, tree = model.structure(old)
+    lk_new, _ = model.structure(new)
+    ratio = jnp.stack([lk_new.joints[j].clearance / lk_old.joints[j].clearance for j in tree.cut])
+    guess = y * model.state_scales(old) / model.state_scales(new)
+    return model.state_from_eccentricities(
+        new, 0.0, d * ratio[:, None], dd * ratio[:, None], model.auxiliary(old, y), guess=guess
+    )
 
 
 def _warm_state(mech, warm):
     """A scaled section state for ``mech`` from a previous [`SteadyState`][jaxcrank.numerics.steady.SteadyState] (its
-    pin-in-bearing state carried over by [`carry_state`][jaxcrank.numerics.steady.carry_state] ) or a scaled state
-    array."""
+    pin-in-bearing state carried over by [`carry_state`][jaxcrank.numerics.steady.carry_state] where the same joints
+    have clearance) or a scaled state array."""
     if isinstance(warm, SteadyState):
         old, y = warm.mechanism, warm.section_state
-        if model.clearance_joints(old) == model.clearance_joints(mech) == ("B", "C"):
-            y = carry_state(old, y, mech)
+        if model.structure(old)[1] == model.structure(mech)[1]:
+            try:
+                y = carry_state(old, y, mech)
+            except ValueError:
+                pass
     else:
         y = jnp.asarray(warm, dtype=float)
     if y.shape != (model.state_size(mech),):
         raise ParameterError(f"warm_start has state shape {y.shape}; this mechanism's is ({model.state_size(mech)},)")
     return y.at[-2:].set(0.0)
-
-
-def _check_arguments(
-    settle_revolutions,
-    max_period,
-    recurrence_tol,
-    newton_tol,
-    max_newton,
-    statistics_revolutions,
-    batch_revolutions,
-    samples_per_revolution,
-):
-    for name, value, low in (
-        ("settle_revolutions", settle_revolutions, 1),
-        ("max_period", max_period, 1),
-        ("max_newton", max_newton, 0),
-        ("batch_revolutions", batch_revolutions, 1),
-        ("samples_per_revolution", samples_per_revolution, 2),
-    ):
-        if not (isinstance(value, (int, np.integer)) and value >= low):
-            raise ParameterError(f"{name} = {value!r} must be an integer >= {low}")
-    if not (isinstance(statistics_revolutions, (int, np.integer)) and statistics_revolutions >= 2 * batch_revolutions):
-        raise ParameterError(
-            f"statistics_revolutions = {statistics_revolutions!r} must be an integer >= 2 * batch_revolutions "
-            f"= {2 * batch_revolutions} (two batches at least)"
-        )
-    for name, value in (("recurrence_tol", recurrence_tol), ("newton_tol", newton_tol)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise ParameterError(f"{name} = {value!r} must be a finite number > 0 (scaled units: clearances)")
 
 
 def steady_state(
@@ -263,7 +248,7 @@ def steady_state(
         ParameterError: for an argument outside its range (the message names it).
         SteadyStateError: with ``throw=True``, when a solve or the shooting failed.
     """
-    _check_arguments(
+    shooting.check_arguments(
         settle_revolutions,
         max_period,
         recurrence_tol,
@@ -273,6 +258,7 @@ def steady_state(
         batch_revolutions,
         samples_per_revolution,
     )
+    shooting.check_periodic_driver(mech)
     counts = {"settle": 0, "shooting": 0, "orbit": 0, "statistics": 0}
     y0 = model.initial_state(mech) if warm_start is None else _warm_state(mech, warm_start)
     warm_k = warm_start.period_revolutions if isinstance(warm_start, SteadyState) and warm_start.periodic else 0

@@ -3,11 +3,12 @@ with the number of samples or steps.
 
 [`MetricsTracking`][jaxcrank.numerics.tracking.MetricsTracking] wraps a diffrax solver. After each step it
 
-- evaluates the signals of `jaxcrank.analysis.metrics.PEAK_METRICS` at the step's end
+- evaluates the signals of the mechanism's peak metrics
+  ([`jaxcrank.physics.signals.peak_metrics`][]) at the step's end
   and keeps their running maxima: the peaks over the solution, independent of the
   output sample times (a step a few microseconds long resolves an impact, an
   output sample every 0.1 deg of crank angle does not);
-- evaluates the signals of `jaxcrank.analysis.metrics.RMS_METRICS` at the sample times
+- evaluates the signals of its RMS metrics ([`jaxcrank.physics.signals.rms_metrics`][]) at the sample times
   that fall in the step, from the step's dense output (the values ``SaveAt(ts=...)``
   would store), and adds their squares: the RMS over the samples, the numbers of the
   RMS of stored samples (to rounding). The sample times are equally spaced and
@@ -30,15 +31,15 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
-from ..analysis import metrics
-from ..physics import model
+from ..physics import model, signals
 
 
 class Running(NamedTuple):
     """The accumulators (a solver-state entry): peaks over step ends in the window
-    and over the whole run (in the order of `jaxcrank.analysis.metrics.PEAK_METRICS`),
-    sums of squares over the window's samples and their count (order of
-    `jaxcrank.analysis.metrics.RMS_METRICS`), and the index of the next sample time."""
+    and over the whole run (in the order of the mechanism's
+    [`peak_metrics`][jaxcrank.physics.signals.peak_metrics]), sums of squares over the window's samples and
+    their count (order of its [`rms_metrics`][jaxcrank.physics.signals.rms_metrics]), and the index of the
+    next sample time."""
 
     peaks: Float[Array, " peaks"]
     whole_run_peaks: Float[Array, " peaks"]
@@ -47,23 +48,10 @@ class Running(NamedTuple):
     next_sample: Int[Array, ""]
 
 
-def _initial_peaks():
-    return jnp.array([-jnp.inf if metrics.METRICS[k].reduction == "max" else 0.0 for k in metrics.PEAK_METRICS])
-
-
-def _peak_values(frame: model.Frame):
-    sig = metrics.signals(frame)
-    out = []
-    for name in metrics.PEAK_METRICS:
-        m = metrics.METRICS[name]
-        out.append(jnp.abs(sig[m.signal]) if m.reduction == "max_abs" else sig[m.signal])
-    return jnp.stack(out)
-
-
 class MetricsTracking(diffrax.AbstractAdaptiveSolver):
     """A diffrax solver that steps like ``solver`` and accumulates the headline
     metrics ([`Running`][jaxcrank.numerics.tracking.Running]) in its state. ``args`` of the solve must be the
-    [`jaxcrank.Mechanism`][jaxcrank.physics.params.Mechanism].
+    mechanism ([`AbstractMechanism`][jaxcrank.physics.linkage.AbstractMechanism]).
 
     Attributes:
         solver: the solver that takes the steps (its steps, error estimates and dense
@@ -107,9 +95,9 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
 
     def init(self, terms, t0, t1, y0, args):
         running = Running(
-            _initial_peaks(),
-            _initial_peaks(),
-            jnp.zeros(len(metrics.RMS_METRICS)),
+            signals.initial_peaks(args),
+            signals.initial_peaks(args),
+            jnp.zeros(len(signals.rms_metrics(args))),
             jnp.zeros((), dtype=int),
             jnp.zeros((), dtype=int),
         )
@@ -119,7 +107,7 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
         inner, run = solver_state
         y1, y_error, dense_info, inner, result = self.solver.step(terms, t0, t1, y0, args, inner, made_jump)
         mech = args
-        value = _peak_values(model.evaluate(mech, t1, y1))
+        value = signals.peak_values(mech, model.evaluate(mech, t1, y1))
         peaks = jnp.where(t1 > self.t_start, jnp.maximum(run.peaks, value), run.peaks)
         whole = jnp.maximum(run.whole_run_peaks, value)
 
@@ -134,7 +122,7 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
             i, sums, count = carry
             t = self.sample_time(i)
             inside = t > self.t_start
-            sig = metrics.rms_signals(model.evaluate(mech, t, interpolation.evaluate(t)))
+            sig = signals.rms_signals(mech, model.evaluate(mech, t, interpolation.evaluate(t)))
             return i + 1, sums + jnp.where(inside, sig**2, 0.0), count + inside.astype(count.dtype)
 
         i, sums, count = jax.lax.while_loop(pending, visit, (run.next_sample, run.sums, run.count))
@@ -144,14 +132,22 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
         return self.solver.func(terms, t0, y0, args)
 
 
-def finish(running: Running) -> dict[str, Array]:
-    """The metrics of `jaxcrank.analysis.metrics.METRICS` (plus
-    ``peak_contact_force_{B,C}_whole_run_N``) from the accumulators of a finished
-    solve; units as in the names. A window without samples gives an RMS of 0."""
-    out = metrics.by_name(metrics.PEAK_METRICS, running.peaks)
+def finish(running: Running, mech) -> dict[str, Array]:
+    """The metrics of ``mech`` ([`jaxcrank.physics.signals.metric_definitions`][], in that
+    order) from the accumulators of a finished solve, plus the whole run's peak contact
+    forces (``peak_contact_force_<joint>_whole_run_N``); units as in the names. A window
+    without samples gives an RMS of 0."""
+    peak_names, rms_names = signals.peak_metrics(mech), signals.rms_metrics(mech)
+    out = dict(zip(peak_names, jnp.moveaxis(running.peaks, -1, 0)))
     n = jnp.maximum(running.count, 1)[..., None].astype(running.sums.dtype)
-    out.update(metrics.by_name(metrics.RMS_METRICS, jnp.sqrt(running.sums / n)))
-    whole_run = metrics.by_name(metrics.PEAK_METRICS, running.whole_run_peaks)
-    for joint in "BC":
-        out[f"peak_contact_force_{joint}_whole_run_N"] = whole_run[f"peak_contact_force_{joint}_N"]
-    return {k: out[k] for k in list(metrics.METRICS) + [f"peak_contact_force_{j}_whole_run_N" for j in "BC"]}
+    out.update(zip(rms_names, jnp.moveaxis(jnp.sqrt(running.sums / n), -1, 0)))
+    whole_run = dict(zip(peak_names, jnp.moveaxis(running.whole_run_peaks, -1, 0)))
+    ordered = {k: out[k] for k in signals.metric_definitions(mech)}
+    for name in signals.force_metrics(mech):
+        ordered[whole_run_name(name)] = whole_run[name]
+    return ordered
+
+
+def whole_run_name(name: str) -> str:
+    """``peak_contact_force_B_N`` -> ``peak_contact_force_B_whole_run_N``."""
+    return name[: -len("_N")] + "_whole_run_N"

@@ -1,10 +1,12 @@
 """Compiling the kernel's C source with the machine's C compiler and loading it.
 
 The shared library is cached under ``$JAXCRANK_KERNEL_CACHE`` (default
-``~/.cache/jaxcrank/kernel``), named by a hash of the source, the compiler's version,
-its flags and the CPU model, so a changed model, compiler or machine compiles anew
-and an unchanged one loads in milliseconds. Compilation writes to a temporary file
-and renames it, so concurrent processes never load a half-written library.
+``~/.cache/jaxcrank/kernel``), named by a hash of the source without its comments
+(they name lines of the model's files, which move when those files are edited without
+changing the code), the compiler's version, its flags and the CPU model, so a changed
+model, compiler or machine compiles anew and an unchanged one loads in milliseconds.
+Compilation writes to a temporary file and renames it, so concurrent processes never
+load a half-written library.
 
 Flags: ``-O3 -march=native`` (the machine's vector instructions),
 ``-ffp-contract=off`` (no fused multiply-add: the rounding of XLA's CPU programs
@@ -19,6 +21,7 @@ import functools
 import hashlib
 import os
 import platform
+import re
 import shutil
 import subprocess
 import tempfile
@@ -60,9 +63,13 @@ def _machine_key() -> str:
     return "\n".join([version, cpu, platform.machine(), " ".join(FLAGS)])
 
 
+_COMMENT = re.compile(r"/\*.*?\*/", flags=re.S)
+
+
 def library_path(source: str) -> Path:
-    """The cache path of the library compiled from ``source``."""
-    digest = hashlib.sha256((source + _machine_key()).encode()).hexdigest()[:24]
+    """The cache path of the library compiled from ``source`` (the same for sources that differ
+    only in their ``/* */`` comments)."""
+    digest = hashlib.sha256((_COMMENT.sub("", source) + _machine_key()).encode()).hexdigest()[:24]
     return cache_dir() / f"jaxcrank_kernel_{digest}.so"
 
 

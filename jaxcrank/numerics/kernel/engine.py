@@ -19,8 +19,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ...analysis import metrics
-from ...physics.params import Mechanism, ParameterError, set_parameters
+from ...physics.linkage import AbstractMechanism as Mechanism
+from ...physics.parameters import set_parameters
+from ...physics.params import ParameterError
 from . import build, source
 
 #: status codes, as :data:`jaxcrank.runs.sweep.STATUSES` numbers them
@@ -31,11 +32,12 @@ class Batch(NamedTuple):
     """What the kernel returns for a batch of n designs.
 
     Attributes:
-        metrics: (n, len(METRICS)) in `jaxcrank.analysis.metrics.METRICS` order, units in the names.
+        metrics: (n, metrics) in the order of the structure's metrics
+            ([`jaxcrank.numerics.kernel.source.names`][]), units in the names.
         status: (n,) status codes (0 ok, 1 max_steps, 3 non_finite).
         steps: (n,) accepted steps. rejected: (n,) rejected steps.
         y: (n, state) scaled state at the end (where the solve stopped).
-        whole_run_peaks: (n, len(PEAK_METRICS)) peaks over the whole run, not only the window.
+        whole_run_peaks: (n, peak metrics) peaks over the whole run, not only the window.
     """
 
     metrics: np.ndarray
@@ -65,13 +67,14 @@ def default_threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def finish(peaks, sums, count) -> np.ndarray:
-    """The metrics (n, len(METRICS)) from the kernel's accumulators, as
+def finish(st: source.Structure, peaks, sums, count) -> np.ndarray:
+    """The metrics (n, metrics) of structure ``st`` from the kernel's accumulators, as
     [`jaxcrank.numerics.tracking.finish`][] computes them."""
-    out = {k: peaks[:, j] for j, k in enumerate(metrics.PEAK_METRICS)}
+    nm = source.names(st)
+    out = {k: peaks[:, j] for j, k in enumerate(nm.peak)}
     rms = np.sqrt(sums / np.maximum(count, 1)[:, None])
-    out.update({k: rms[:, j] for j, k in enumerate(metrics.RMS_METRICS)})
-    return np.stack([out[k] for k in metrics.METRICS], axis=1)
+    out.update({k: rms[:, j] for j, k in enumerate(nm.rms)})
+    return np.stack([out[k] for k in nm.metrics], axis=1)
 
 
 def solve_mechanisms(
@@ -145,10 +148,23 @@ def _run(st, params, t_end, t_start, n_samples, rtol, atol, dt0, max_steps, y0, 
         n, threads, params, t_end, t_start, int(n_samples), int(max_steps), float(rtol), float(atol), float(dt0),
         y, peaks, whole, sums, count, accepted, rejected, result,
     )  # fmt: skip
-    values = finish(peaks, sums, count)
+    values = finish(st, peaks, sums, count)
     finite = np.all(np.isfinite(y), axis=1) & np.all(np.isfinite(values), axis=1)
     status = np.where(result == 0, np.where(finite, OK, NON_FINITE), MAX_STEPS)
     return Batch(values, status.astype(np.int64), accepted, rejected, y, whole)
+
+
+def initial_states(base: Mechanism, names: Sequence[str], xs: np.ndarray) -> np.ndarray:
+    """The scaled pins-centred start ([`jaxcrank.physics.model.initial_state`][jaxcrank.physics.state.initial_state])
+    of each design ``xs`` (n, len(names)) of ``base``, shape (n, state): zeros where the
+    base's joint laws all start at zero (every law of jaxcrank does), else design by design."""
+    from ...physics import model
+
+    xs = np.atleast_2d(np.asarray(xs, dtype=np.float64))
+    y0 = np.asarray(model.initial_state(base))
+    if not np.any(y0):
+        return np.zeros((len(xs), y0.size))
+    return np.stack([np.asarray(model.initial_state(set_parameters(base, list(names), list(x)))) for x in xs])
 
 
 def solve(
@@ -170,5 +186,6 @@ def solve(
     o = settings.options
     st = source.structure(base, names)  # the parameters that do not vary are compile-time constants
     t_end, t_start = settings.revolutions * periods, settings.metrics_from_revolution * periods
-    args = (settings.n_samples, o.rtol, o.atol, o.dt0, o.max_steps, None, threads, vector)
+    y0 = initial_states(base, names, xs)
+    args = (settings.n_samples, o.rtol, o.atol, o.dt0, o.max_steps, y0, threads, vector)
     return _run(st, xs, t_end, t_start, *args)

@@ -16,7 +16,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ...physics.params import Mechanism, ParameterError, set_parameters
+from ...physics.linkage import AbstractMechanism as Mechanism
+from ...physics.parameters import set_parameters
+from ...physics.params import ParameterError
 from . import engine, source
 
 OPTIONS = ("--std=c++14", "--fmad=false")
@@ -70,7 +72,7 @@ def solve(base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, block
         "params": cupy.asarray(np.ascontiguousarray(xs)),
         "t_end": cupy.asarray(settings.revolutions * periods),
         "t_start": cupy.asarray(settings.metrics_from_revolution * periods),
-        "y": cupy.zeros((n, lay.n_state)),
+        "y": cupy.asarray(engine.initial_states(base, names, xs)),
         "peaks": cupy.zeros((n, lay.n_peak)),
         "whole": cupy.zeros((n, lay.n_peak)),
         "sums": cupy.zeros((n, lay.n_rms)),
@@ -87,7 +89,7 @@ def solve(base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, block
     fn(((n + block - 1) // block,), (block,), args)
     cupy.cuda.runtime.deviceSynchronize()
     host = {k: cupy.asnumpy(v) for k, v in dev.items()}
-    values = engine.finish(host["peaks"], host["sums"], host["count"])
+    values = engine.finish(st, host["peaks"], host["sums"], host["count"])
     finite = np.all(np.isfinite(host["y"]), axis=1) & np.all(np.isfinite(values), axis=1)
     status = np.where(host["result"] == 0, np.where(finite, engine.OK, engine.NON_FINITE), engine.MAX_STEPS)
     return engine.Batch(values, status.astype(np.int64), host["accepted"], host["rejected"], host["y"], host["whole"])

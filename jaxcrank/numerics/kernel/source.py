@@ -18,7 +18,9 @@ Three functions are generated from JAX ([`.codegen`][jaxcrank.numerics.kernel.co
 - ``jk_interp(t0, t1, y0, k, t, y)``: diffrax's Tsit5 dense output.
 
 The tableau and the controller's constants are read from diffrax's objects here, so
-the loop steps with the numbers the JAX path uses.
+the loop steps with the numbers the JAX path uses. A name map at the top of the source
+([`.namemap`][jaxcrank.numerics.kernel.namemap]) names every parameter by its path in the
+mechanism's pytree, and the generated functions index the parameters by those names.
 """
 
 from __future__ import annotations
@@ -26,36 +28,40 @@ from __future__ import annotations
 import functools
 from collections.abc import Sequence
 from importlib import resources
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import diffrax
 import jax
 import numpy as np
 
-from ...analysis import metrics
-from ...physics import model
-from ...physics.params import Mechanism, set_parameters
-from .. import tracking
-from . import codegen
+from ...physics import model, signals
+from ...physics.linkage import AbstractMechanism as Mechanism
+from ...physics.parameters import set_parameters
+from . import codegen, namemap
 
 
 class Structure(NamedTuple):
     """What the generated code depends on (hashable).
 
     Attributes:
-        skeleton: the mechanism with its float parameters replaced by zeros (laws,
+        treedef: the mechanism's pytree structure (laws, names,
             ideal flags and the pytree layout remain).
         constants: the values of every float parameter, baked into the code as
             literals (the compiler folds them), with ``names`` the run-time inputs;
             or ``None``: every float parameter is a run-time input
             ([`parameter_vector`][jaxcrank.numerics.kernel.source.parameter_vector] order).
-        names: the parameters ([`jaxcrank.physics.params.set_parameter`][] names)
+        names: the parameters ([`jaxcrank.physics.parameters.set_parameter`][] names)
             that are run-time inputs when ``constants`` is given.
     """
 
-    skeleton: Mechanism
+    treedef: Any
     constants: tuple[float, ...] | None = None
     names: tuple[str, ...] = ()
+
+
+def skeleton(st: Structure) -> Mechanism:
+    """The mechanism of ``st`` with every float parameter zero (for its names and layout only)."""
+    return jax.tree_util.tree_unflatten(st.treedef, [0.0] * st.treedef.num_leaves)
 
 
 def structure(mech: Mechanism, names: Sequence[str] | None = None) -> Structure:
@@ -63,10 +69,9 @@ def structure(mech: Mechanism, names: Sequence[str] | None = None) -> Structure:
     (``names`` None), or ``mech``'s values baked in and only ``names`` as inputs
     (a sweep over ``names``: per-design code for the parameters that do not vary)."""
     leaves, treedef = jax.tree_util.tree_flatten(mech)
-    skeleton = jax.tree_util.tree_unflatten(treedef, [0.0] * len(leaves))
     if names is None:
-        return Structure(skeleton)
-    return Structure(skeleton, tuple(float(v) for v in parameter_vector(mech)), tuple(names))
+        return Structure(treedef)
+    return Structure(treedef, tuple(float(v) for v in parameter_vector(mech)), tuple(names))
 
 
 def parameter_vector(mech: Mechanism) -> np.ndarray:
@@ -96,38 +101,99 @@ class Layout(NamedTuple):
 
 def _mechanism(st: Structure, p):
     """The mechanism whose run-time inputs are ``p`` (traced)."""
-    treedef = jax.tree_util.tree_structure(st.skeleton)
+    treedef = st.treedef
     if st.constants is None:
         return jax.tree_util.tree_unflatten(treedef, [p[i] for i in range(treedef.num_leaves)])
     base = jax.tree_util.tree_unflatten(treedef, list(st.constants))
     return set_parameters(base, list(st.names), [p[i] for i in range(len(st.names))])
 
 
+class Names(NamedTuple):
+    """The names of a structure's outputs (static): its peak metrics, its RMS metrics,
+    all its metrics in order, the initial values of the running peaks and its state entries."""
+
+    peak: tuple[str, ...]
+    rms: tuple[str, ...]
+    metrics: tuple[str, ...]
+    peak_init: tuple[float, ...]
+    state: tuple[str, ...]
+
+
+@functools.lru_cache(maxsize=64)
+def names(st: Structure) -> Names:
+    """The [`Names`][jaxcrank.numerics.kernel.source.Names] of a structure, read off its mechanism under a
+    trace (the skeleton's zero parameters are never checked)."""
+    n_params = st.treedef.num_leaves if st.constants is None else len(st.names)
+    found = []
+
+    def probe(p):
+        mech = _mechanism(st, p)
+        defs = signals.metric_definitions(mech)
+        init = tuple(-np.inf if defs[k].reduction == "max" else 0.0 for k in signals.peak_metrics(mech))
+        found.append(
+            Names(signals.peak_metrics(mech), signals.rms_metrics(mech), tuple(defs), init, model.state_names(mech))
+        )
+        return p
+
+    jax.eval_shape(probe, jax.ShapeDtypeStruct((n_params,), np.float64))
+    return found[0]
+
+
 def layout(st: Structure) -> Layout:
-    skel = st.skeleton
-    n_params = jax.tree_util.tree_structure(skel).num_leaves if st.constants is None else len(st.names)
-    return Layout(n_params, model.state_size(skel), len(metrics.PEAK_METRICS), len(metrics.RMS_METRICS))
+    n_params = st.treedef.num_leaves if st.constants is None else len(st.names)
+    nm = names(st)
+    return Layout(n_params, len(nm.state), len(nm.peak), len(nm.rms))
 
 
-def _functions(st: Structure) -> str:
+def parameter_names(st: Structure) -> tuple[str, ...]:
+    """The name of each run-time input ``p[i]`` of ``st``'s code: the pytree path of the
+    mechanism leaf (``joints.B.pin_radius``) when every parameter is an input, else ``st.names``."""
+    return namemap.leaf_paths(skeleton(st)) if st.constants is None else tuple(st.names)
+
+
+def _groups(st: Structure, state_names: Sequence[str] | None) -> list[namemap.Group]:
+    nm = names(st)
+    state_names = nm.state if state_names is None else tuple(state_names)
+    if len(state_names) != layout(st).n_state:
+        raise ValueError(f"{len(state_names)} state names for a state of {layout(st).n_state} entries")
+    return [
+        namemap.Group(("p",), "P_", parameter_names(st), "the run-time parameters (SI)"),
+        namemap.Group(
+            ("y", "rate", "y0", "out"), "Y_", state_names, "the scaled state (dimensionless) and its rate (1/s)"
+        ),
+        namemap.Group(("peak",), "PEAK_", nm.peak, "per-step signals of the peak metrics"),
+        namemap.Group(("rms",), "RMS_", nm.rms, "per-step signals of the RMS metrics"),
+    ]
+
+
+def _name_map(st: Structure, state_names: Sequence[str] | None) -> str:
+    """The name map of ``st``'s code ([`.namemap`][jaxcrank.numerics.kernel.namemap]), with the
+    values baked into it when only some parameters are run-time inputs."""
+    baked = () if st.constants is None else tuple(zip(namemap.leaf_paths(skeleton(st)), st.constants))
+    return namemap.name_map(_groups(st, state_names), baked)
+
+
+def _functions(st: Structure, state_names: Sequence[str] | None = None) -> str:
     lay = layout(st)
+    names = namemap.index_names(_groups(st, state_names))
 
     def field(p, t, y):
         return (model.vector_field(t, y, _mechanism(st, p)),)
 
     def frame(p, t, y):
-        f = model.evaluate(_mechanism(st, p), t, y)
-        return f.state_rate, tracking._peak_values(f), metrics.rms_signals(f)
+        mech = _mechanism(st, p)
+        f = model.evaluate(mech, t, y)
+        return f.state_rate, signals.peak_values(mech, f), signals.rms_signals(mech, f)
 
     def interp(t0, t1, y0, k, t):
         return (diffrax.Tsit5.interpolation_cls(t0=t0, t1=t1, y0=y0, y1=y0, k=k).evaluate(t),)
 
     pin = [("p", (lay.n_params,)), ("t", ()), ("y", (lay.n_state,))]
-    src_field, _ = codegen.emit_function("jk_field", field, pin, ["rate"])
-    src_frame, shapes = codegen.emit_function("jk_frame", frame, pin, ["rate", "peak", "rms"])
+    src_field, _ = codegen.emit_function("jk_field", field, pin, ["rate"], names)
+    src_frame, shapes = codegen.emit_function("jk_frame", frame, pin, ["rate", "peak", "rms"], names)
     n = lay.n_state
     src_interp, _ = codegen.emit_function(
-        "jk_interp", interp, [("t0", ()), ("t1", ()), ("y0", (n,)), ("k", (7, n)), ("t", ())], ["out"]
+        "jk_interp", interp, [("t0", ()), ("t1", ()), ("y0", (n,)), ("k", (7, n)), ("t", ())], ["out"], names
     )
     assert shapes == [(n,), (lay.n_peak,), (lay.n_rms,)], shapes
     vector = "\n".join(["#ifndef __CUDACC__", VECTOR, src_field, src_frame, "#endif"])
@@ -148,7 +214,7 @@ def _constants(st: Structure) -> str:
     c = np.concatenate([[0.0], tab.c])
     ctrl = diffrax.PIDController(rtol=1.0, atol=1.0, pcoeff=0.0, icoeff=1.0)
     error_order = diffrax.Tsit5().error_order(diffrax.ODETerm(lambda t, y, a: y))
-    peak_init = np.array(tracking._initial_peaks())
+    peak_init = np.array(names(st).peak_init)
     return "\n".join(
         [
             f"#define NP {lay.n_params}",
@@ -296,17 +362,34 @@ int jk_field_batch(long n, const double *params, const double *t, const double *
 """
 
 
-def field_source(st: Structure) -> str:
+def field_source(st: Structure, state_names: Sequence[str] | None = None) -> str:
     """A C source with the generated vector field alone and its batch entry point
-    ``jk_field_batch`` (what the field's tests compile: shorter than the whole kernel)."""
+    ``jk_field_batch`` (what the field's tests compile: shorter than the whole kernel);
+    ``state_names`` as for [`kernel_source`][jaxcrank.numerics.kernel.source.kernel_source]."""
     lay = layout(st)
     pin = [("p", (lay.n_params,)), ("t", ()), ("y", (lay.n_state,))]
     field, _ = codegen.emit_function(
-        "jk_field", lambda p, t, y: (model.vector_field(t, y, _mechanism(st, p)),), pin, ["rate"]
+        "jk_field",
+        lambda p, t, y: (model.vector_field(t, y, _mechanism(st, p)),),
+        pin,
+        ["rate"],
+        namemap.index_names(_groups(st, state_names)),
     )
     sizes = f"#define NP {lay.n_params}\n#define NY {lay.n_state}"
     return "\n".join(
-        [PRELUDE, sizes, SCALAR, field, FIELD_BATCH, "#ifndef __CUDACC__", VECTOR, field, VECTOR_BATCH, "#endif"]
+        [
+            PRELUDE,
+            sizes,
+            _name_map(st, state_names),
+            SCALAR,
+            field,
+            FIELD_BATCH,
+            "#ifndef __CUDACC__",
+            VECTOR,
+            field,
+            VECTOR_BATCH,
+            "#endif",
+        ]
     )
 
 
@@ -330,9 +413,28 @@ int jk_field_batch_v(long n, const double *params, const double *t, const double
 
 
 @functools.lru_cache(maxsize=16)
-def kernel_source(st: Structure) -> str:
-    """The complete C source (prelude, constants, generated functions, ``solver.c``)."""
+def kernel_source(st: Structure, state_names: tuple[str, ...] | None = None) -> str:
+    """The complete C source (prelude, constants, name map, generated functions, ``solver.c``).
+
+    Args:
+        st: the mechanism structure.
+        state_names: a name per state entry, for the name map (``y[Y_name]`` in the code);
+            None: state entries indexed by number.
+
+    Raises:
+        ValueError: ``state_names`` does not have one name per state entry.
+    """
     loop = resources.files(__package__).joinpath("solver.c").read_text()
     return "\n".join(
-        [PRELUDE, _constants(st), _functions(st), loop, FIELD_BATCH, "#ifndef __CUDACC__", VECTOR_BATCH, "#endif"]
+        [
+            PRELUDE,
+            _constants(st),
+            _name_map(st, state_names),
+            _functions(st, state_names),
+            loop,
+            FIELD_BATCH,
+            "#ifndef __CUDACC__",
+            VECTOR_BATCH,
+            "#endif",
+        ]
     )

@@ -69,12 +69,22 @@ def _ctype(dtype) -> str:
 
 
 class _Writer:
-    """Emits C statements and names their results."""
+    """Emits C statements and names their results.
+
+    Attributes:
+        lines: the statements (and comments) written so far.
+        where: the source of the statements written next (a comment's text, or None);
+            the comment precedes the next statement when it differs from the last one written.
+        scopes: the ``jax.named_scope`` names around the equation being written.
+    """
 
     def __init__(self):
         self.lines: list[str] = []
         self.count = 0
         self.seen: dict[tuple[str, str], str] = {}
+        self.where: str | None = None
+        self.scopes: tuple[str, ...] = ()
+        self._said: str | None = None
 
     def new(self, expr: str, dtype) -> str:
         """The name of ``expr``'s value: a new local, or the one an identical expression
@@ -87,6 +97,9 @@ class _Writer:
         self.seen[key] = name
         self.count += 1
         ctype = _ctype(dtype)
+        if self.where is not None and self.where != self._said:
+            self.lines.append(f"  /* {self.where} */")
+            self._said = self.where
         wrap = "KV" if ctype == "KD" else "KVL"  # a statement of literals alone is a scalar: broadcast it
         self.lines.append(f"  const {ctype} {name} = {wrap}({expr});")
         return name
