@@ -60,7 +60,7 @@ def test_resume_of_a_missing_run_directory_creates_nothing(tmp_path, capsys):
 
 def test_clearance_out_of_range_names_the_parameter_and_range(tmp_path, capsys):
     code = main(["simulate", "--set", "clearance_B=0.009", "--out", str(tmp_path / "run"), "--quiet"])
-    _one_line_error(capsys, code, "clearance_B", "joint_B.hole_radius")
+    _one_line_error(capsys, code, "clearance_B", "joints.B.hole_radius")
 
 
 def test_design_file_without_a_final_mechanism(tmp_path, capsys):

@@ -10,32 +10,35 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import jaxcrank as jc
 from jaxcrank import metrics
+from jaxcrank.physics.presets import paper_guide
 
 # Computes, in a fresh process, every objective value and tracked metric by name, after
-# permuting the metric definitions (METRICS' order, and the RMS and peak tuples) before
-# anything else reads them. Short windows: the pathwise design terms and objective over
+# permuting the metric definitions (the order of metric_definitions, and of the RMS and
+# peak tuples) before anything else reads them. Short windows: the pathwise design terms and objective over
 # the first 1.2 ms, the ensemble design objective over 2 ms in two windows, the paper
 # problem's objective (Eq. 19), the sensitivity metric values and summary of a 5 ms run.
 _PERMUTED = """
 import json, sys
 import numpy as np
 import jaxcrank.analysis.metrics as M
+import jaxcrank.physics.signals as S
 
 order = sys.argv[1]
 if order == "reversed":
-    items = list(M.METRICS.items())[::-1]
-    M.METRICS.clear()
-    M.METRICS.update(items)
-    M.PEAK_METRICS = M.PEAK_METRICS[::-1]
-    M.RMS_METRICS = M.RMS_METRICS[::-1]
+    definitions, peaks, rms = S.metric_definitions, S.peak_metrics, S.rms_metrics
+    S.metric_definitions = lambda mech: dict(list(definitions(mech).items())[::-1])
+    S.peak_metrics = lambda mech: peaks(mech)[::-1]
+    S.rms_metrics = lambda mech: rms(mech)[::-1]
+    M.metric_definitions, M.peak_metrics, M.rms_metrics = S.metric_definitions, S.peak_metrics, S.rms_metrics
 
 import jax.numpy as jnp
 import jaxcrank as jc
 from jaxcrank import outputs
 from optim import objective as O, sensitivity
 from optim.design import design_problem
-from optim.problem import paper_problem
+from optim.presets import paper_problem
 
 out = {}
 exact = O.Pathwise(t_start=0.0, t_end=1.2e-3, rtol=1e-10, atol=1e-10, max_steps=100_000)
@@ -61,22 +64,67 @@ def _objective_values(order: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def test_every_metric_is_a_named_definition():
-    for name, m in metrics.METRICS.items():
-        assert isinstance(m, metrics.Metric), name
-        assert m.reduction in ("max_abs", "max", "rms") and m.signal in metrics.SIGNALS and m.meaning, name
-    assert set(metrics.RMS_METRICS) | set(metrics.PEAK_METRICS) == set(metrics.METRICS)
-    assert set(metrics.meanings()) == set(metrics.METRICS)
+# the paper's metric names, as they were before mechanisms were described as data
+PAPER_METRICS = (
+    "max_abs_rod_x_deviation_m",
+    "max_abs_slider_x_deviation_m",
+    "max_abs_slider_ax_deviation_m_s2",
+    "peak_contact_force_B_N",
+    "peak_contact_force_C_N",
+    "max_penetration_B_m",
+    "max_penetration_C_m",
+    "peak_driving_moment_N_m",
+    "rms_driving_moment_deviation_N_m",
+    "rms_rod_x_deviation_m",
+    "rms_slider_x_deviation_m",
+    "rms_transmission_angle_error_deg",
+    "max_abs_transmission_angle_error_deg",
+    "rms_contact_force_B_N",
+    "rms_contact_force_C_N",
+)
+MECHANISMS = {"paper": jc.paper, "paper-guide": paper_guide, "four-bar": jc.four_bar}
+
+
+@pytest.mark.parametrize("name", MECHANISMS)
+def test_every_metric_is_a_named_definition(name):
+    mech = MECHANISMS[name]()
+    defs = metrics.metric_definitions(mech)
+    signals = metrics.signal_meanings(mech)
+    for key, m in defs.items():
+        assert isinstance(m, metrics.Metric), key
+        assert m.reduction in ("max_abs", "max", "rms") and m.signal in signals and m.meaning, key
+    assert set(metrics.rms_metrics(mech)) | set(metrics.peak_metrics(mech)) == set(defs)
+    assert set(metrics.meanings(mech)) == set(defs)
+    assert set(metrics.force_metrics(mech)) <= set(metrics.peak_metrics(mech))
+
+
+def test_metric_names_come_from_the_description():
+    """The paper keeps its names (and gains joints A and guide); the four-bar's name its
+    rocker; the guide with clearance has a penetration."""
+    paper = set(metrics.metric_definitions(jc.paper()))
+    assert set(PAPER_METRICS) <= paper
+    assert paper - set(PAPER_METRICS) == {f"{k}_contact_force_{j}_N" for k in ("peak", "rms") for j in ("A", "guide")}
+    four_bar = set(metrics.metric_definitions(jc.four_bar()))
+    assert {
+        "max_abs_rocker_angle_deviation_deg",
+        "rms_rocker_angle_deviation_deg",
+        "max_abs_rocker_angular_acceleration_deviation_rad_s2",
+        "rms_transmission_angle_error_deg",
+        "peak_contact_force_D_N",
+    } <= four_bar
+    assert not any("slider" in k or "rod_" in k for k in four_bar)
+    assert "max_penetration_guide_m" in metrics.metric_definitions(paper_guide())
 
 
 def test_a_vector_of_metrics_is_built_and_read_by_name():
-    values = {k: jnp.asarray(float(i)) for i, k in enumerate(metrics.RMS_METRICS)}
-    named = metrics.by_name(metrics.RMS_METRICS, metrics.stack(metrics.RMS_METRICS, values))
+    rms, peaks = metrics.rms_metrics(jc.paper()), metrics.peak_metrics(jc.paper())
+    values = {k: jnp.asarray(float(i)) for i, k in enumerate(rms)}
+    named = metrics.by_name(rms, metrics.stack(rms, values))
     assert {k: float(v) for k, v in named.items()} == {k: float(v) for k, v in values.items()}
-    batch = metrics.by_name(metrics.PEAK_METRICS, jnp.ones((3, len(metrics.PEAK_METRICS))))
+    batch = metrics.by_name(peaks, jnp.ones((3, len(peaks))))
     assert all(v.shape == (3,) for v in batch.values())
     with pytest.raises(ValueError, match="cannot hold"):
-        metrics.by_name(metrics.RMS_METRICS, jnp.zeros(len(metrics.RMS_METRICS) - 1))
+        metrics.by_name(rms, jnp.zeros(len(rms) - 1))
 
 
 def test_reduce_signal_names_an_unknown_reduction():

@@ -11,29 +11,41 @@ from jaxcrank import cli, config
 BAD = [
     ({"rod_length": 0.15}, "rod_length"),
     ({"offset": 0.3}, "rod_length"),
-    ({"joint_B": {"pin_radius": 8e-3}}, "pin_radius"),
-    ({"joint_C": {"pin_radius": 9e-3}}, "pin_radius"),
+    ({"joints": {"B": {"pin_radius": 8e-3}}}, "pin_radius"),
+    ({"joints": {"C": {"pin_radius": 9e-3}}}, "pin_radius"),
     ({"rod_mass": 0.0}, "rod_mass"),
     ({"slider_mass": -1.0}, "slider_mass"),
     ({"crank_mass": -0.1}, "crank_mass"),
     ({"rod_inertia": 0.0}, "rod_inertia"),
-    ({"crank_speed": 0.0}, "crank_speed"),
-    ({"crank_speed": -5.0}, "crank_speed"),
-    ({"rod_material": {"youngs_modulus": 0.0}}, "youngs_modulus"),
-    ({"crank_material": {"poisson_ratio": 0.5}}, "poisson_ratio"),
-    ({"slider_material": {"poisson_ratio": 0.0}}, "poisson_ratio"),
+    ({"driver": {"speed": 0.0}}, "driver.speed"),
+    ({"driver": {"speed": -5.0}}, "driver.speed"),
+    ({"joints": {"B": {"hole_material": {"youngs_modulus": 0.0}}}}, "youngs_modulus"),
+    ({"joints": {"B": {"pin_material": {"poisson_ratio": 0.5}}}}, "poisson_ratio"),
+    ({"joints": {"C": {"pin_material": {"poisson_ratio": 0.0}}}}, "poisson_ratio"),
     ({"contact": {"restitution": 0.0}}, "restitution"),
     ({"contact": {"restitution": 1.2}}, "restitution"),
     ({"friction": {"coefficient": -0.1}}, "friction coefficient"),
     ({"friction": {"slip_speed": 1e-5}}, "slip_speed"),
     ({"friction": {"slip_speed": float("nan")}}, "slip_speed"),
     ({"friction": {"slip_speed": float("inf")}}, "slip_speed"),
-    ({"contact": {"law": "hertzian"}}, "contact law"),
-    ({"friction": {"law": "stribeck"}}, "friction law"),
+    ({"contact": {"law": "hertzian"}}, "contact.law"),
+    ({"friction": {"law": "stribeck"}}, "friction.law"),
     ({"rod_lenght": 0.4}, "rod_lenght"),
     ({"contact": {"stiffness": 1.0}}, "contact.stiffness"),
     ({"rod_length": "long"}, "rod_length"),
-    ({"joint_B": 3.0}, "joint_B"),
+    ({"joints": {"B": 3.0}}, "joints.B"),
+    ({"joint_B": {"pin_radius": 7e-3}}, "joint_B"),
+    ({"joints": {"D": {"law": "ideal"}}}, "unknown joint 'D'"),
+    ({"joints": {"B": {"law": "bushing"}}}, "joints.B.law"),
+    ({"joints": {"A": {"pin_radius": 7e-3}}}, "joints.A.pin_radius"),
+    ({"memory": {"law": "eternal"}}, "memory.law"),
+    ({"memory": {"memory_time": 0.0}}, "memory_time"),
+    ({"driver": {"type": "motor"}}, "driver.type"),
+    ({"driver": {"law": "constant_speed"}}, "driver.law"),
+    ({"joints": {"B": {"type": "revolute"}}}, "joints.B.type"),
+    ({"joints": {"guide": {"direction": 0.1}}}, "joints.guide.direction"),
+    ({"mechanism": "crank-rocker"}, "mechanism"),
+    ({"mechanism": "four-bar", "rocker_length": 0.05}, "crank-rocker"),
 ]
 
 
@@ -46,12 +58,15 @@ def test_bad_input_names_parameter(data, name):
 def test_errors_state_valid_range():
     with pytest.raises(jc.ParameterError, match=r"valid range.*\(0, 1\]"):
         config.from_dict({"contact": {"restitution": 1.5}})
-    with pytest.raises(jc.ParameterError, match="ideal = true"):
-        jc.Joint(hole_radius=8e-3, pin_radius=8e-3)
+    with pytest.raises(jc.ParameterError, match='law = "ideal"'):
+        jc.Clearance(hole_radius=8e-3, pin_radius=8e-3)
 
 
-def test_ideal_joint_allows_zero_clearance():
-    assert jc.Joint(hole_radius=8e-3, pin_radius=8e-3, ideal=True).clearance == 0.0
+def test_ideal_joint_has_no_clearance_to_set():
+    mech = config.from_dict({"joints": {"C": {"law": "ideal"}}})
+    assert mech.joints["C"].ideal and not mech.joints["B"].ideal
+    with pytest.raises(jc.ParameterError, match="joint 'C' is ideal"):
+        jc.set_parameter(mech, "clearance_C", 1e-4)
 
 
 def test_malformed_toml(tmp_path):
@@ -62,21 +77,23 @@ def test_malformed_toml(tmp_path):
 
 
 def test_toml_round_trip(tmp_path):
-    mech = config.apply_overrides(jc.paper(), ["rod_length=0.41", "contact.law=flores", "joint_C.ideal=true"])
+    mech = config.apply_overrides(jc.paper(), ["rod_length=0.41", "contact.law=flores", "joints.C.law=ideal"])
     path = tmp_path / "m.toml"
     config.save(mech, path)
     again = config.load(path)
     assert eqx.tree_equal(mech, again)
-    assert isinstance(again.contact.law, jc.laws.Flores) and again.joint_C.ideal
+    assert isinstance(again.joints["B"].contact.law, jc.laws.Flores) and again.joints["C"].ideal
 
 
 def test_paper_preset_values(paper):
     assert paper.crank_length == 0.150 and paper.rod_length == 0.403 and paper.offset == 0.050
     assert (paper.crank_mass, paper.rod_mass, paper.slider_mass) == (0.6967, 1.5473, 1.7964)
     assert (paper.crank_inertia, paper.rod_inertia, paper.slider_inertia) == (1.931e-3, 2.233e-4, 3.431e-4)
-    assert paper.joint_B.clearance == pytest.approx(5e-4) and paper.joint_C.clearance == pytest.approx(5e-4)
-    assert paper.crank_speed == pytest.approx(62.83185307)
-    assert isinstance(paper.contact.law, jc.laws.Hybrid)
+    assert paper.joints["B"].clearance == pytest.approx(5e-4) and paper.joints["C"].clearance == pytest.approx(5e-4)
+    assert paper.joints["A"].ideal and paper.joints["guide"].ideal
+    assert paper.driver.speed == pytest.approx(62.83185307) and paper.driver.initial_angle == 0.0
+    for j in "BC":
+        assert isinstance(paper.joints[j].contact.law, jc.laws.Hybrid)
 
 
 def test_cli_simulate_writes_run_directory(tmp_path):
@@ -108,7 +125,7 @@ def test_cli_simulate_writes_run_directory(tmp_path):
     assert summary["solver"]["steps"] > 0 and "rms_transmission_angle_error_deg" in summary["metrics"]
     assert len(list((out / "figures").glob("*.png"))) == 7
     # config.toml reproduces the run's parameters
-    assert config.load(out / "config.toml").friction.coefficient == 0.05
+    assert all(config.load(out / "config.toml").joints[j].friction.coefficient == 0.05 for j in "BC")
 
 
 def test_cli_bad_input_exits_with_message(tmp_path, capsys):

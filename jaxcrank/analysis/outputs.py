@@ -8,64 +8,59 @@ named columns with units; [`summary_metrics`][jaxcrank.analysis.outputs.summary_
 
 from __future__ import annotations
 
-import math
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ..numerics.solve import Simulation
-from ..physics import ideal, model
+from ..physics import model
 from ..physics.params import ParameterError
-from .metrics import DEG, headline, transmission_angle_deviation
+from ..physics.state import structure
+from .metrics import DEG, headline
 
-# column name -> unit, in CSV order; the first block is the issue's required set
-COLUMNS = {
-    "t": "s",
-    "crank_angle": "deg",
-    "rod_x": "m",
-    "rod_vx": "m/s",
-    "rod_ax": "m/s^2",
-    "slider_x": "m",
-    "slider_vx": "m/s",
-    "slider_ax": "m/s^2",
-    "ideal_rod_x": "m",
-    "ideal_rod_vx": "m/s",
-    "ideal_rod_ax": "m/s^2",
-    "ideal_slider_x": "m",
-    "ideal_slider_vx": "m/s",
-    "ideal_slider_ax": "m/s^2",
-    "ecc_B_x": "m",
-    "ecc_B_y": "m",
-    "ecc_C_x": "m",
-    "ecc_C_y": "m",
-    "force_B_normal": "N",
-    "force_C_normal": "N",
-    "driving_moment": "N m",
-    "ideal_driving_moment": "N m",
-    "transmission_angle": "deg",
-    "ideal_transmission_angle": "deg",
-    "rod_y": "m",
-    "rod_vy": "m/s",
-    "rod_ay": "m/s^2",
-    "ideal_rod_y": "m",
-    "ideal_rod_vy": "m/s",
-    "ideal_rod_ay": "m/s^2",
-    "rod_angle": "deg",
-    "ideal_rod_angle": "deg",
-    "penetration_B": "m",
-    "penetration_C": "m",
-    "force_B_friction": "N",
-    "force_C_friction": "N",
-    "slip_speed_B": "m/s",
-    "slip_speed_C": "m/s",
-    "kinetic_energy": "J",
-    "potential_energy": "J",
-    "contact_energy": "J",
-    "driver_work": "J",
-    "dissipated_work": "J",
-}
+_BODY_COLUMNS = (
+    ("x", "m"),
+    ("y", "m"),
+    ("angle", "deg"),
+    ("vx", "m/s"),
+    ("vy", "m/s"),
+    ("omega", "rad/s"),
+    ("ax", "m/s^2"),
+    ("ay", "m/s^2"),
+    ("alpha", "rad/s^2"),
+)
+_JOINT_COLUMNS = (
+    ("ecc_{}_x", "m"),
+    ("ecc_{}_y", "m"),
+    ("penetration_{}", "m"),
+    ("force_{}_normal", "N"),
+    ("force_{}_friction", "N"),
+    ("slip_speed_{}", "m/s"),
+)
+
+
+def columns(mech) -> dict[str, str]:
+    """Column name -> unit of [`trajectory`][jaxcrank.analysis.outputs.trajectory] for ``mech``, in CSV order:
+    time; each body's centre-of-mass pose, velocity and acceleration (``<body>_x``,
+    ``<body>_angle``, ``<body>_vx``, ``<body>_omega``, ``<body>_alpha``, ...) and the ideal
+    mechanism's (``ideal_<body>_x``, ...); each joint's eccentricity, penetration, normal
+    and friction force and slip speed; driving moments; transmission angles; energies."""
+    _, tree = structure(mech)
+    out = {"t": "s"}
+    for prefix in ("", "ideal_"):
+        for b in tree.bodies:
+            for k, unit in _BODY_COLUMNS:
+                out[f"{prefix}{b}_{k}"] = unit
+    for j in tree.joints:
+        for pattern, unit in _JOINT_COLUMNS:
+            out[pattern.format(j)] = unit
+    out.update({"driving_moment": "N m", "ideal_driving_moment": "N m"})
+    if mech.linkage().outputs.transmission is not None:
+        out.update({"transmission_angle": "deg", "ideal_transmission_angle": "deg"})
+    for k in ("kinetic_energy", "potential_energy", "contact_energy", "driver_work", "dissipated_work"):
+        out[k] = "J"
+    return out
 
 
 @jax.jit
@@ -83,62 +78,39 @@ def frames(sim: Simulation) -> model.Frame:
 
 
 def trajectory(sim: Simulation) -> dict[str, Float[np.ndarray, " n"]]:
-    """Named output columns (units in `COLUMNS`; SI, angles in degrees)."""
+    """Named output columns of a simulation (SI, angles in degrees;
+    [`columns`][jaxcrank.analysis.outputs.columns] gives their units)."""
+    mech = sim.mechanism
+    _, tree = structure(mech)
     f = frames(sim)
-    cols = {
-        "t": f.t,
-        "crank_angle": f.crank_angle * DEG,
-        "rod_x": f.q[:, 0],
-        "rod_vx": f.qd[:, 0],
-        "rod_ax": f.qdd[:, 0],
-        "slider_x": f.q[:, 3],
-        "slider_vx": f.qd[:, 3],
-        "slider_ax": f.qdd[:, 3],
-        "ideal_rod_x": f.ideal_q[:, 0],
-        "ideal_rod_vx": f.ideal_qd[:, 0],
-        "ideal_rod_ax": f.ideal_qdd[:, 0],
-        "ideal_slider_x": f.ideal_q[:, 3],
-        "ideal_slider_vx": f.ideal_qd[:, 3],
-        "ideal_slider_ax": f.ideal_qdd[:, 3],
-        "ecc_B_x": f.eccentricity_B[:, 0],
-        "ecc_B_y": f.eccentricity_B[:, 1],
-        "ecc_C_x": f.eccentricity_C[:, 0],
-        "ecc_C_y": f.eccentricity_C[:, 1],
-        "force_B_normal": f.normal_force_B,
-        "force_C_normal": f.normal_force_C,
-        "driving_moment": f.driving_moment,
-        "ideal_driving_moment": f.ideal_driving_moment,
-        "transmission_angle": ideal.transmission_angle(f.q[:, 2]) * DEG,
-        "ideal_transmission_angle": ideal.transmission_angle(f.ideal_q[:, 2]) * DEG,
-        "rod_y": f.q[:, 1],
-        "rod_vy": f.qd[:, 1],
-        "rod_ay": f.qdd[:, 1],
-        "ideal_rod_y": f.ideal_q[:, 1],
-        "ideal_rod_vy": f.ideal_qd[:, 1],
-        "ideal_rod_ay": f.ideal_qdd[:, 1],
-        "rod_angle": f.q[:, 2] * DEG,
-        "ideal_rod_angle": f.ideal_q[:, 2] * DEG,
-        "penetration_B": f.penetration_B,
-        "penetration_C": f.penetration_C,
-        "force_B_friction": f.friction_force_B,
-        "force_C_friction": f.friction_force_C,
-        "slip_speed_B": f.slip_speed_B,
-        "slip_speed_C": f.slip_speed_C,
-        "kinetic_energy": f.kinetic_energy,
-        "potential_energy": f.potential_energy,
-        "contact_energy": f.contact_energy,
-        "driver_work": f.driver_work,
-        "dissipated_work": f.dissipated_work,
-    }
-    return {k: np.asarray(cols[k]) for k in COLUMNS}
+    cols = {"t": f.t}
+    for prefix, q, qd, qdd in (("", f.q, f.qd, f.qdd), ("ideal_", f.ideal_q, f.ideal_qd, f.ideal_qdd)):
+        for i, b in enumerate(tree.bodies):
+            values = (q[:, i, 0], q[:, i, 1], q[:, i, 2] * DEG, qd[:, i, 0], qd[:, i, 1], qd[:, i, 2])
+            values += (qdd[:, i, 0], qdd[:, i, 1], qdd[:, i, 2])
+            for (k, _), v in zip(_BODY_COLUMNS, values):
+                cols[f"{prefix}{b}_{k}"] = v
+    for m, j in enumerate(tree.joints):
+        values = (f.eccentricity[:, m, 0], f.eccentricity[:, m, 1], f.penetration[:, m], f.normal_force[:, m])
+        values += (f.friction_force[:, m], f.slip_speed[:, m])
+        for (pattern, _), v in zip(_JOINT_COLUMNS, values):
+            cols[pattern.format(j)] = v
+    cols.update(driving_moment=f.driving_moment, ideal_driving_moment=f.ideal_driving_moment)
+    cols.update(
+        transmission_angle=f.transmission_angle * DEG, ideal_transmission_angle=f.ideal_transmission_angle * DEG
+    )
+    for k in ("kinetic_energy", "potential_energy", "contact_energy", "driver_work", "dissipated_work"):
+        cols[k] = getattr(f, k)
+    return {k: np.asarray(cols[k]) for k in columns(mech)}
 
 
 def transmission_angle_error(mech, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, " n"]:
     """Actual minus ideal transmission angle at sample times ``ts`` (s) with scaled
-    states ``ys``, degrees; compared at the same time, i.e. the same crank angle."""
+    states ``ys``, degrees; compared at the same driver angle."""
 
     def one(t, y):
-        return transmission_angle_deviation(model.evaluate(mech, t, y).q[2], ideal.positions(mech, t)[2])
+        f = model.evaluate(mech, t, y)
+        return (f.transmission_angle - f.ideal_transmission_angle) * DEG
 
     return jax.vmap(one)(ts, ys)
 
@@ -146,7 +118,7 @@ def transmission_angle_error(mech, ts: Float[ArrayLike, " n"], ys: Float[ArrayLi
 def rms_transmission_error(sim: Simulation, t_start: Float[ArrayLike, ""] | None = None) -> Float[Array, ""]:
     """RMS of (actual - ideal) transmission angle over samples with t > t_start,
     degrees (paper Eq. 19; samples are at equal crank-angle steps when ``ts`` is
-    equally spaced). Differentiable. Default ``t_start``: one crank revolution."""
+    equally spaced). Differentiable. Default ``t_start``: one revolution."""
     mech = sim.mechanism
     t_start = mech.period if t_start is None else t_start
     err = transmission_angle_error(mech, sim.ts, sim.ys)
@@ -160,8 +132,8 @@ _headline = jax.jit(headline)
 def summary_metrics(sim: Simulation) -> dict[str, float]:
     """The headline metrics a solve tracked (``simulate(..., metrics_start=...)``,
     [`jaxcrank.numerics.tracking`][]) as Python floats: ``window_start_s``, every metric of
-    `jaxcrank.analysis.metrics.METRICS` and the whole run's peak contact forces
-    (``peak_contact_force_{B,C}_whole_run_N``); units in the names.
+    the mechanism ([`jaxcrank.physics.signals.metric_definitions`][]) and the whole run's
+    peak contact forces (``peak_contact_force_<joint>_whole_run_N``); units in the names.
 
     Raises:
         ValueError: if the solve did not track metrics.
@@ -172,7 +144,7 @@ def summary_metrics(sim: Simulation) -> dict[str, float]:
 
 
 def sample_metrics(sim: Simulation, t_start: Float[ArrayLike, ""]) -> dict[str, float]:
-    """The headline metrics (`jaxcrank.analysis.metrics.METRICS`) over the stored
+    """The headline metrics of the mechanism over the stored
     samples of ``sim`` with ``t > t_start`` (s), as Python floats: the peaks are
     maxima over the samples, not over the solve (for solves that were not tracked,
     e.g. another package's solution wrapped in a [`Simulation`][jaxcrank.numerics.solve.Simulation]).
@@ -186,7 +158,7 @@ def sample_metrics(sim: Simulation, t_start: Float[ArrayLike, ""]) -> dict[str, 
         raise ParameterError(
             f"metrics window: t_start = {t_start:g} s leaves no sample; the run ends at t = {float(f.t[-1]):g} s"
         )
-    return {k: float(v) for k, v in _headline(f, t_start).items()}
+    return {k: float(v) for k, v in _headline(sim.mechanism, f, t_start).items()}
 
 
 def energy_balance(cols: dict[str, Float[np.ndarray, " n"]], i0: int = 0, i1: int = -1) -> dict[str, float]:
@@ -204,41 +176,3 @@ def energy_balance(cols: dict[str, Float[np.ndarray, " n"]], i0: int = 0, i1: in
         "dissipated_work_J": w_diss,
         "residual_J": d_energy - (w_drive - w_diss),
     }
-
-
-def deviation_bounds(mech, max_penetration: Float[ArrayLike, ""]) -> dict[str, float]:
-    """Largest |x deviation| of slider and rod centre that the loop closure allows, m.
-
-    Args:
-        mech: the mechanism (an ideal joint contributes no play).
-        max_penetration: largest contact penetration of the run, m (>= 0).
-
-    Closure, with ``d_B``, ``d_C`` the pin eccentricities (|d| <= rho = c + max_penetration
-    at a clearance joint, 0 at an ideal one) and ``D = d_B - d_C`` (|D| <= play =
-    rho_B + rho_C)::
-
-        dx3 = -D_x + L2 (cos theta2 - cos theta2_ideal),   L2 (sin theta2 - sin theta2_ideal) = D_y
-        dx2 = -d_Bx + (L2 / 2) (cos theta2 - cos theta2_ideal)
-
-    ``|sin theta2_ideal| <= s_m = (L1 + |e|) / L2``, and the cosine changes most at the
-    steepest point: ``L2 |cos theta2 - cos theta2_ideal| <= L2 g(|D_y|)`` with
-    ``g(y) = sqrt(1 - s_m^2) - sqrt(1 - min(1, s_m + y / L2)^2)``, convex in y, so below
-    its secant ``k |D_y|``, ``k = L2 g(play) / play`` (k -> tan theta2_max for small play).
-    Hence ``|dx3| <= play sqrt(1 + k^2)`` (Cauchy-Schwarz) and
-    ``|dx2| <= rho_B + k play / 2``. (The clearances alone are not a bound: the rod-angle
-    change adds up to k times the y play.)
-
-    Returns:
-        ``{"slider_x_m": ..., "rod_x_m": ...}``, m.
-    """
-    pen = float(max_penetration)
-    rho = {
-        j: 0.0 if getattr(mech, f"joint_{j}").ideal else float(getattr(mech, f"joint_{j}").clearance) + pen
-        for j in "BC"
-    }
-    play = rho["B"] + rho["C"]
-    l2 = float(mech.rod_length)
-    s_m = (float(mech.crank_length) + abs(float(mech.offset))) / l2
-    s_hi = min(1.0, s_m + play / l2)
-    k = l2 * (math.sqrt(1.0 - s_m**2) - math.sqrt(1.0 - s_hi**2)) / play if play > 0 else 0.0
-    return {"slider_x_m": play * math.sqrt(1.0 + k**2), "rod_x_m": rho["B"] + k * play / 2.0}

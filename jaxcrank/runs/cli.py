@@ -84,7 +84,7 @@ def run_simulate(args) -> int:
     mech = config.mechanism_from_arguments(args)
     if args.t1 <= 0:
         raise ParameterError(f"--t1 = {args.t1:g} s must be positive")
-    degrees = math.degrees(float(mech.crank_speed) * args.t1)
+    degrees = math.degrees(float(mech.speed) * args.t1)
     n_samples = max(2, int(round(degrees * args.samples_per_degree)) + 1)
 
     out = args.out
@@ -108,11 +108,12 @@ def run_simulate(args) -> int:
     jax.block_until_ready(sim.ys)
     wall = time.perf_counter() - start
     cols = outputs.trajectory(sim)
+    units = outputs.columns(mech)
 
     with open(out / "trajectory.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
-        writer.writerow(list(outputs.COLUMNS))
-        for row in zip(*(cols[k] for k in outputs.COLUMNS)):
+        writer.writerow(list(units))
+        for row in zip(*(cols[k] for k in units)):
             writer.writerow([f"{v:.10g}" for v in row])
 
     metrics = {**outputs.summary_metrics(sim), "window_end_s": float(cols["t"][-1])}
@@ -140,30 +141,36 @@ def run_simulate(args) -> int:
             "to_s": float(cols["t"][-1]),
             **outputs.energy_balance(cols, i0=i0),
         },
-        "units": outputs.COLUMNS,
+        "mechanism": mech.linkage().name,
+        "units": units,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     if not args.no_figures:
-        clearances = {
-            j: 0.0 if getattr(mech, f"joint_{j}").ideal else float(getattr(mech, f"joint_{j}").clearance) for j in "BC"
-        }
-        plots.save_figures(cols, clearances, out / "figures")
-    m = summary["metrics"]
+        plots.save_figures(cols, mech, out / "figures")
     print(f"wrote {out}/ (trajectory.csv, config.toml, summary.json{'' if args.no_figures else ', figures/'})")
     print(f"  {int(sim.num_steps)} steps ({int(sim.num_rejected)} rejected) in {wall:.1f} s")
-    print(
-        f"  {window}: max |rod x dev| = {m['max_abs_rod_x_deviation_m'] * 1e3:.3f} mm, "
-        f"max |slider x dev| = {m['max_abs_slider_x_deviation_m'] * 1e3:.3f} mm, "
-        f"RMS transmission-angle error = {m['rms_transmission_angle_error_deg']:.4f} deg"
-    )
+    print(f"  {window}: {_headline_text(summary['metrics'])}")
     return 0
+
+
+def _headline_text(metrics: dict) -> str:
+    """The largest deviations and the RMS transmission-angle error, in words."""
+    parts = []
+    for name, value in metrics.items():
+        if name.startswith("max_abs_") and name.endswith("_deviation_m"):
+            parts.append(f"max |{name[8:-12].replace('_', ' ')} dev| = {value * 1e3:.3f} mm")
+        elif name.startswith("max_abs_") and name.endswith("_angle_deviation_deg"):
+            parts.append(f"max |{name[8:-14].replace('_', ' ')} dev| = {value:.4f} deg")
+    if "rms_transmission_angle_error_deg" in metrics:
+        parts.append(f"RMS transmission-angle error = {metrics['rms_transmission_angle_error_deg']:.4f} deg")
+    return ", ".join(parts)
 
 
 def _window_label(metrics: dict, period: float) -> str:
     """What the metrics window of [`jaxcrank.analysis.outputs.summary_metrics`][] was, in words."""
     start, end = metrics["window_start_s"], metrics["window_end_s"]
     if start == 0.0:
-        return f"over the whole run, 0 to {end:g} s (shorter than one crank revolution, {period:g} s)"
+        return f"over the whole run, 0 to {end:g} s (shorter than one revolution, {period:g} s)"
     return f"after the first revolution ({start:g} to {end:g} s)"
 
 
@@ -179,7 +186,9 @@ TOML spec (SI units; every key but [parameters] optional):
                        # that fits in 80 % of its free memory (1024 per device where the
                        # backend reports none); a chunk needing more than the free memory
                        # is refused
-  metrics = ["max_abs_slider_x_deviation_m", "peak_contact_force_C_N"]  # plotted (all are computed)
+  metrics = ["max_abs_slider_x_deviation_m", "peak_contact_force_C_N"]  # plotted (all are computed;
+                       # the names are the mechanism's, e.g. max_abs_rocker_angle_deviation_deg)
+  mechanism = "four-bar"  # the base mechanism: a preset (paper, four-bar, ...) or a [mechanism] table
 
   [parameters.clearance_B]          # any parameter: clearance_B, rod_length, contact.restitution, ...
   values = [1e-4, 2.5e-4, 5e-4]     # grid: explicit levels, or lower/upper/points
@@ -188,7 +197,11 @@ TOML spec (SI units; every key but [parameters] optional):
 
   [simulation]         # revolutions = 4, samples_per_revolution = 3600, metrics_from_revolution = 1,
                        # solver = "tsit5", rtol = 1e-6, atol = 1e-6, max_steps = 500000
-  [mechanism]          # the base mechanism, as in `jaxcrank simulate`'s config.toml
+  [mechanism]          # or the base mechanism written out, as in `jaxcrank simulate`'s config.toml
+                       # (its own mechanism = "four-bar" key, [mechanism.joints.B], ...)
+
+--mechanism NAME, --config FILE or --design RESULT_JSON give the base mechanism instead
+(the spec then has none); --set KEY=VALUE and --rpm change it.
 
 Engines: --engine kernel (default where a C compiler is available: one design per CPU
 thread, tsit5 only, chunk default 16 per thread) or --engine xla (every solver; several
@@ -206,7 +219,10 @@ def _sweep_parser(p):
     )
     p.epilog = SWEEP_SPEC_HELP
     p.formatter_class = argparse.RawDescriptionHelpFormatter
+    from . import config
+
     p.add_argument("--spec", type=Path, required=True, help="sweep spec TOML (see below)")
+    config.add_mechanism_arguments(p, "sweep designs of")
     p.add_argument("--out", type=Path, default=Path("runs/sweep"), help="output directory (default runs/sweep)")
     p.add_argument("--resume", action="store_true", help="continue the sweep in --out where it stopped")
     p.add_argument(
@@ -240,7 +256,6 @@ def run_sweep(args) -> int:
     import jax
 
     from ..analysis import metrics
-    from ..physics.params import parameter_unit
     from . import engines, plots, sweep
     from . import spec as spec_module
 
@@ -248,7 +263,7 @@ def run_sweep(args) -> int:
         jax.distributed.initialize(
             coordinator_address=args.coordinator, num_processes=args.num_processes, process_id=args.process_id
         )
-    spec = spec_module.load_spec(args.spec)
+    spec = spec_module.load_spec(args.spec, args)
     out = args.out
     if jax.process_index() == 0:
         out.mkdir(parents=True, exist_ok=True)
@@ -287,11 +302,12 @@ def run_sweep(args) -> int:
             "engine": engine,
             "settings": spec.settings.to_text(),
             "versions": _versions(),
-            "metric_meanings": metrics.meanings(),
+            "mechanism": spec.base.linkage().name,
+            "metric_meanings": metrics.meanings(spec.base),
         }
     )
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    param_cols = [f"{n}_{parameter_unit(n)}" for n in spec.names]
+    param_cols = sweep.parameter_columns(spec.base, spec.names)
     files = plots.sweep_figures(table, spec.sampling, param_cols, spec.metrics, out / "figures")
     counts = summary["status_counts"]
     print(

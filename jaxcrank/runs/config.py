@@ -1,15 +1,17 @@
-"""Load and save a [`Mechanism`][jaxcrank.physics.params.Mechanism] as TOML, and apply
-command-line overrides.
+"""Load and save a mechanism as TOML, and apply command-line overrides.
 
-The file mirrors the pytree: top-level keys are the mechanism's scalar fields,
-tables ``[joint_B]``, ``[joint_C]``, ``[crank_material]``, ``[rod_material]``,
-``[slider_material]``, ``[contact]``, ``[friction]`` its parts. Every value is SI
-(see [`Mechanism`][jaxcrank.physics.params.Mechanism]). Unknown keys and wrong types are errors.
+A file is the nested dict of [`jaxcrank.runs.codec`][]: ``mechanism`` names the kind (a
+preset class such as ``"slider-crank"`` or ``"four-bar"`` with its dimensions at the top
+level, or ``"linkage"`` for a linkage written out body by body), ``[joints.<name>]`` the
+law of each joint, ``[driver]`` what turns it. Every value is SI. Unknown keys and wrong
+types are errors.
 
-The parameter names are the library's ([`jaxcrank.physics.params.set_parameter`][]):
-besides the fields and dotted paths, the top-level keys ``clearance_B`` and
-``clearance_C`` set a joint's radial clearance (m; the pin shrinks, the hole stays), in
-a file and on the command line (``jaxcrank simulate --set clearance_B=2e-4``) alike.
+Shorthands, in a file and on the command line alike (``jaxcrank simulate --set KEY=VALUE``):
+
+- ``clearance_<joint>``: that joint's radial clearance, m (the pin shrinks, the hole stays);
+- top-level ``[contact]``, ``[friction]``, ``[memory]``, ``[pin_material]``,
+  ``[hole_material]`` tables (``--set contact.law=flores``): the same settings for every
+  joint whose law has them.
 """
 
 from __future__ import annotations
@@ -18,131 +20,104 @@ import dataclasses
 import tomllib
 from pathlib import Path
 
-import numpy as np
 import tomli_w
 
-from ..physics.laws import CONTACT_LAWS, FRICTION_LAWS, AbstractContactLaw, AbstractFrictionLaw
-from ..physics.params import Contact, Friction, Joint, Material, Mechanism, ParameterError
+from ..physics.joints import JOINT_LAWS
+from ..physics.linkage import AbstractMechanism
+from ..physics.params import ParameterError
+from . import codec
 
-_PARTS = {
-    "joint_B": Joint,
-    "joint_C": Joint,
-    "crank_material": Material,
-    "rod_material": Material,
-    "slider_material": Material,
-    "contact": Contact,
-    "friction": Friction,
-}
-# laws are Modules in Python and names in TOML / on the command line
-_LAWS = {"contact": ("contact law", CONTACT_LAWS), "friction": ("friction law", FRICTION_LAWS)}
-_BOOL_FIELDS = {"ideal"}
-#: the library's clearance names (top-level keys here): radial clearance c = hole_radius - pin_radius, m
-_CLEARANCES = {"clearance_B": "joint_B", "clearance_C": "joint_C"}
+#: top-level tables that apply to every joint whose law has them (the tied names of
+#: [`jaxcrank.physics.parameters`][])
+TIED = ("contact", "friction", "memory", "pin_material", "hole_material")
 
 
-def _fields(cls):
-    return [f.name for f in dataclasses.fields(cls)]
+def to_dict(mech: AbstractMechanism) -> dict:
+    """Nested plain-Python dict of every parameter (SI) ([`jaxcrank.runs.codec.to_dict`][])."""
+    return codec.to_dict(mech)
 
 
-def _plain(value):
-    if isinstance(value, (AbstractContactLaw, AbstractFrictionLaw)):
-        return value.name
-    if isinstance(value, (bool, str)):
-        return value
-    arr = np.asarray(value)
-    if arr.ndim:
-        raise ParameterError("only scalar parameters can be written to TOML")
-    return float(arr)
+def _law_fields(table: dict) -> set[str]:
+    """The parameters of the joint law a joint table names (none for an unknown law)."""
+    cls = JOINT_LAWS.get(table.get("law", "ideal"))
+    return {f.name for f in dataclasses.fields(cls) if f.init} if cls is not None else set()
 
 
-def to_dict(mech: Mechanism) -> dict:
-    """Nested plain-Python dict of every parameter (SI)."""
-    out = {}
-    for name in _fields(Mechanism):
-        value = getattr(mech, name)
-        if name in _PARTS:
-            out[name] = {k: _plain(getattr(value, k)) for k in _fields(_PARTS[name])}
+def _expand(data: dict, base: AbstractMechanism | None) -> dict:
+    """The shorthands of the module docstring written out as joint tables."""
+    data = dict(data)
+    tied = {k: data.pop(k) for k in TIED if k in data}
+    clearances = {k: data.pop(k) for k in list(data) if k.startswith("clearance_")}
+    if not tied and not clearances:
+        return data
+    given = data.get("joints") or {}
+    if not isinstance(given, dict):
+        raise ParameterError(f"[joints] must be a table of joint tables, got {given!r}")
+    for j, t in given.items():
+        if not isinstance(t, dict):
+            raise ParameterError(f"[joints.{j}] must be a table, got {t!r}")
+    kind = data.get("mechanism")
+    if base is not None and kind not in (None, codec.kind_of(base)):
+        base = None  # the data names a mechanism of another kind: the base does not apply
+    if base is None and kind == "linkage":
+        laws = {}  # a linkage written out: its joint tables are all there is
+    else:
+        if base is None:
+            base = codec.from_dict({k: v for k, v in data.items() if k != "joints"})
+        laws = codec.to_dict(base)["joints"]
+    joints = {j: dict(t) for j, t in given.items()}
+    for j, t in joints.items():
+        laws[j] = codec.merge(laws.get(j, {}), t)
+    for part, table in tied.items():
+        if not isinstance(table, dict):
+            raise ParameterError(f"[{part}] must be a table of parameters, got {table!r}")
+        targets = [j for j, t in laws.items() if part in _law_fields(t)]
+        if not targets:
+            raise ParameterError(f"[{part}]: no joint has {part} settings (give a joint a clearance law first)")
+        for j in targets:
+            joints.setdefault(j, {})[part] = codec.merge(joints.get(j, {}).get(part, {}), table)
+    for key, c in clearances.items():
+        joint = key[len("clearance_") :]
+        law = laws.get(joint)
+        if law is None:
+            raise ParameterError(f"unknown parameter {key!r}: the joints are {', '.join(sorted(laws))}")
+        mine = given.get(joint, {})
+        if isinstance(c, bool) or not isinstance(c, (int, float)):
+            raise ParameterError(f"{key} must be a number (the joint's clearance, m), got {c!r}")
+        if "hole_radius" in law:  # a revolute clearance: the pin shrinks, the hole stays
+            if "pin_radius" in mine:
+                raise ParameterError(f"{key} and joints.{joint}.pin_radius both set the pin radius: give one of them")
+            hole = law["hole_radius"]
+            if isinstance(hole, bool) or not isinstance(hole, (int, float)):
+                raise ParameterError(f"joints.{joint}.hole_radius must be a number, got {hole!r}")
+            if not 0.0 < c < hole:
+                raise ParameterError(
+                    f"{key} = {c!r} m is out of range: the radial clearance must lie in "
+                    f"(0, joints.{joint}.hole_radius = {hole:g} m)"
+                )
+            joints.setdefault(joint, {})["pin_radius"] = hole - c
+        elif "clearance" in _law_fields(law):  # a law whose clearance is a parameter of its own (a guide's gap)
+            if "clearance" in mine:
+                raise ParameterError(f"{key} and joints.{joint}.clearance both set the clearance: give one of them")
+            if not 0.0 < c < float("inf"):
+                raise ParameterError(f"{key} = {c!r} m is out of range: the clearance must lie in (0, inf)")
+            joints.setdefault(joint, {})["clearance"] = c
         else:
-            out[name] = _plain(value)
-    return out
+            raise ParameterError(f"{key}: joint {joint!r} is ideal; give it a clearance law first")
+    data["joints"] = joints
+    return data
 
 
-def _convert(section: str, key: str, value):
-    where = f"{section}.{key}" if section else key
-    if key == "law" and section in _LAWS:
-        what, registry = _LAWS[section]
-        if not isinstance(value, str):
-            raise ParameterError(f"{where} must be a string, got {value!r}")
-        if value not in registry:
-            raise ParameterError(f"{what} {value!r} is unknown; valid names: {', '.join(registry)}")
-        return registry[value]()
-    if key in _BOOL_FIELDS:
-        if not isinstance(value, bool):
-            raise ParameterError(f"{where} must be true or false, got {value!r}")
-        return value
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{where} must be a number, got {value!r}")
-    return float(value)
-
-
-def from_dict(data: dict, base: Mechanism | None = None) -> Mechanism:
-    """Build a validated Mechanism from a (possibly partial) nested dict; missing
-    keys keep the values of ``base`` (default: the paper preset). The top-level keys
-    ``clearance_B`` / ``clearance_C`` (m) set the pin radius to the joint's hole radius
-    (the one ``data`` gives, else the base's) minus the clearance.
+def from_dict(data: dict, base: AbstractMechanism | None = None) -> AbstractMechanism:
+    """Build a validated mechanism from a (possibly partial) nested dict with the
+    shorthands of the module docstring; missing keys keep the values of ``base``
+    (default: the defaults of the kind ``mechanism`` names, the paper's slider-crank
+    when none).
 
     Raises:
-        ParameterError: for an unknown key, a wrong type or a value out of its range
-            (a clearance outside (0, hole_radius), or given with that joint's pin_radius).
+        ParameterError: for an unknown key, a wrong type or a value out of its range.
     """
-    merged = to_dict(Mechanism() if base is None else base)
-    clearances = {}
-    for key, value in data.items():
-        if key in _CLEARANCES:
-            clearances[key] = _convert("", key, value)
-        elif key in _PARTS:
-            if not isinstance(value, dict):
-                raise ParameterError(f"[{key}] must be a table of parameters, got {value!r}")
-            for sub, v in value.items():
-                if sub not in merged[key]:
-                    raise ParameterError(
-                        f"unknown parameter {key}.{sub}; valid keys in [{key}]: {', '.join(merged[key])}"
-                    )
-                merged[key][sub] = _convert(key, sub, v)
-        elif key in merged:
-            merged[key] = _convert("", key, value)
-        else:
-            valid = ", ".join([*merged, *_CLEARANCES])
-            raise ParameterError(f"unknown parameter {key!r}; valid top-level keys: {valid}")
-    for key, c in clearances.items():
-        _set_clearance(merged, data, key, c)
-    for section in _LAWS:  # the base's laws, written as names by to_dict
-        if isinstance(merged[section]["law"], str):
-            merged[section]["law"] = _convert(section, "law", merged[section]["law"])
-    kwargs = {}
-    for k, v in merged.items():
-        if k not in _PARTS:
-            kwargs[k] = v
-            continue
-        try:
-            kwargs[k] = _PARTS[k](**v)
-        except ParameterError as err:  # name the table: "youngs_modulus" alone does not say whose
-            raise ParameterError(f"[{k}] {err}") from None
-    return Mechanism(**kwargs)
-
-
-def _set_clearance(merged: dict, data: dict, key: str, c: float) -> None:
-    """Set ``merged``'s pin radius of the joint that ``key`` (``clearance_B`` / ``clearance_C``)
-    names to ``hole_radius - c``; the hole radius is the one ``data`` sets, else the base's."""
-    joint = _CLEARANCES[key]
-    if "pin_radius" in data.get(joint, {}):
-        raise ParameterError(f"{key} and {joint}.pin_radius both set the pin radius: give one of them")
-    hole = merged[joint]["hole_radius"]
-    if not 0.0 < c < hole:
-        raise ParameterError(
-            f"{key} = {c:g} m is out of range: the radial clearance must lie in (0, {joint}.hole_radius = {hole:g} m)"
-        )
-    merged[joint]["pin_radius"] = hole - c
+    return codec.from_dict(_expand(data, base), base)
 
 
 def load_toml(path, build):
@@ -158,12 +133,12 @@ def load_toml(path, build):
         raise ParameterError(f"{path}: {err}") from None
 
 
-def load(path) -> Mechanism:
+def load(path) -> AbstractMechanism:
     """Read a TOML config; raises ParameterError naming the file on malformed input."""
     return load_toml(path, from_dict)
 
 
-def load_design(path) -> Mechanism:
+def load_design(path) -> AbstractMechanism:
     """The final design of a ``jaxcrank optimize`` run: the mechanism in the ``final_mechanism``
     table of its ``result.json`` (SI, as [`to_dict`][jaxcrank.runs.config.to_dict] writes it).
 
@@ -185,23 +160,23 @@ def load_design(path) -> Mechanism:
         raise ParameterError(f"{path}: {err}") from None
 
 
-def dumps(mech: Mechanism) -> str:
+def dumps(mech: AbstractMechanism) -> str:
     header = (
-        "# jaxcrank mechanism, SI units (m, kg, s, rad, N, Pa); crank_speed in rad/s.\n"
+        "# jaxcrank mechanism, SI units (m, kg, s, rad, N, Pa); angular speeds in rad/s.\n"
         "# Pass back with `jaxcrank simulate --config FILE` to reproduce a run.\n"
     )
     return header + tomli_w.dumps(to_dict(mech))
 
 
-def save(mech: Mechanism, path) -> None:
+def save(mech: AbstractMechanism, path) -> None:
     Path(path).write_text(dumps(mech))
 
 
 def parse_override(text: str) -> tuple[list[str], object]:
     """``"contact.law=flores"`` -> (["contact", "law"], "flores"); values are TOML literals
-    (numbers, true/false) or bare strings."""
+    (numbers, true/false, lists) or bare strings."""
     if "=" not in text:
-        raise ParameterError(f"override {text!r} must look like key=value, e.g. rod_length=0.41")
+        raise ParameterError(f"override {text!r} must look like key=value, e.g. joints.<joint>.contact.restitution=0.5")
     key, raw = text.split("=", 1)
     try:
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
@@ -210,31 +185,42 @@ def parse_override(text: str) -> tuple[list[str], object]:
     return key.strip().split("."), value
 
 
-def apply_overrides(mech: Mechanism, overrides: list[str]) -> Mechanism:
-    """Apply ``key=value`` overrides (dotted keys for tables; ``clearance_B`` /
-    ``clearance_C`` in m, see [`from_dict`][jaxcrank.runs.config.from_dict]) and re-validate.
+def apply_overrides(mech: AbstractMechanism, overrides: list[str]) -> AbstractMechanism:
+    """Apply ``key=value`` overrides (dotted keys for tables, e.g.
+    ``joints.B.contact.restitution=0.5``; the shorthands ``clearance_<joint>`` (m) and
+    ``contact.<key>``, see [`from_dict`][jaxcrank.runs.config.from_dict]) and re-validate.
 
     Raises:
         ParameterError: on a malformed override, an unknown name or an invalid value.
     """
+    if not overrides:
+        return mech
     data: dict = {}
     for text in overrides:
         path, value = parse_override(text)
-        if len(path) == 1:
-            data[path[0]] = value
-        elif len(path) == 2:
-            data.setdefault(path[0], {})[path[1]] = value
-        else:
-            raise ParameterError(f"override key {'.'.join(path)!r} is too deep; use table.key=value")
+        node = data
+        for part in path[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise ParameterError(f"override {text!r}: {part!r} is a value, not a table")
+        node[path[-1]] = value
     return from_dict(data, base=mech)
 
 
 def add_mechanism_arguments(p, command: str) -> None:
     """Add the options that choose the mechanism a command runs on to the argparse parser
-    ``p``: ``--config FILE`` or ``--design RESULT_JSON``, ``--set KEY=VALUE`` (repeatable)
-    and ``--rpm``; ``command`` names the command in their help.
+    ``p``: ``--mechanism NAME``, ``--config FILE`` or ``--design RESULT_JSON``, ``--set
+    KEY=VALUE`` (repeatable) and ``--rpm``; ``command`` names the command in their help.
     [`mechanism_from_arguments`][jaxcrank.runs.config.mechanism_from_arguments] reads them back."""
+    from ..physics.presets import PRESETS
+
     base = p.add_mutually_exclusive_group()
+    base.add_argument(
+        "--mechanism",
+        metavar="NAME",
+        choices=sorted(PRESETS),
+        help=f"{command} a preset mechanism: {', '.join(PRESETS)} (default: paper)",
+    )
     base.add_argument("--config", type=Path, help="TOML file of parameters (see config.toml of any run)")
     base.add_argument(
         "--design",
@@ -248,28 +234,33 @@ def add_mechanism_arguments(p, command: str) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="override a parameter (SI), as the library names it, e.g. --set rod_length=0.41 "
-        "--set clearance_B=2e-4 --set contact.law=flores (repeatable)",
+        help="override a parameter (SI), as the library names it, e.g. --set gravity=0 --set "
+        "contact.law=flores --set clearance_<joint>=2e-4 --set joints.<joint>.law=ideal (repeatable)",
     )
-    p.add_argument("--rpm", type=float, help="crank speed in rev/min (sets crank_speed in rad/s)")
+    p.add_argument("--rpm", type=float, help="speed of the driven body in rev/min (sets driver.speed in rad/s)")
 
 
-def mechanism_from_arguments(args) -> Mechanism:
+def mechanism_from_arguments(args) -> AbstractMechanism:
     """The mechanism of [`add_mechanism_arguments`][jaxcrank.runs.config.add_mechanism_arguments]' options: the
-    paper's unless ``--config`` or ``--design`` says otherwise, then ``--set`` and ``--rpm``.
+    paper's unless ``--mechanism``, ``--config`` or ``--design`` says otherwise, then
+    ``--set`` and ``--rpm``.
 
     Raises:
         ParameterError: a bad file, override or value (the message names it).
     """
     import math
 
-    from ..physics.params import paper
+    from ..physics.presets import preset
 
-    if args.design:
+    if getattr(args, "design", None):
         mech = load_design(args.design)
+    elif getattr(args, "config", None):
+        mech = load(args.config)
     else:
-        mech = load(args.config) if args.config else paper()
+        mech = preset(getattr(args, "mechanism", None) or "paper")
     overrides = list(args.overrides)
     if args.rpm is not None:
-        overrides.append(f"crank_speed={2.0 * math.pi * args.rpm / 60.0!r}")
+        if not mech.linkage().driver.prescribed:
+            raise ParameterError("--rpm sets a prescribed driver's speed; this mechanism is driven by a torque")
+        overrides.append(f"driver.speed={2.0 * math.pi * args.rpm / 60.0!r}")
     return apply_overrides(mech, overrides)

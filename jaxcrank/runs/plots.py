@@ -8,11 +8,11 @@ import matplotlib.pyplot as plt
 import numpy as np  # noqa: E402
 
 
-def _steady(cols) -> np.ndarray:
-    """Samples after the first crank revolution (the start-up impacts left out), bool; all
-    samples for a run that ends within it."""
-    turned = np.abs(np.asarray(cols["crank_angle"]) - cols["crank_angle"][0])
-    after = turned >= 360.0
+def _steady(cols, mech) -> np.ndarray:
+    """Samples after the driven body's first revolution (the start-up impacts left out),
+    bool; all samples for a run that ends within it."""
+    angle = np.asarray(cols[f"{mech.linkage().driver.body}_angle"])
+    after = np.abs(angle - angle[0]) >= 360.0
     return after if after.any() else np.ones_like(after)
 
 
@@ -51,35 +51,48 @@ def _clip_startup(ax, t, curves, steady, unit):
         )
 
 
-def _ideal_vs_clearance(cols, prefix, title):
+#: per coordinate: the columns' suffixes of position, velocity and acceleration, their
+#: labels, scales and units
+_COORDINATE_ROWS = {
+    "x": [("x", "x", 1e3, "mm"), ("vx", "velocity x", 1.0, "m/s"), ("ax", "acceleration x", 1.0, "m/s$^2$")],
+    "y": [("y", "y", 1e3, "mm"), ("vy", "velocity y", 1.0, "m/s"), ("ay", "acceleration y", 1.0, "m/s$^2$")],
+    "angle": [
+        ("angle", "angle", 1.0, "deg"),
+        ("omega", "angular velocity", 1.0, "rad/s"),
+        ("alpha", "angular acceleration", 1.0, "rad/s$^2$"),
+    ],
+}
+
+
+def _ideal_vs_clearance(cols, mech, body, coordinate):
     """3x2 grid: position, velocity, acceleration; left ideal and clearance, right error.
     The acceleration rows are scaled to the motion after the first revolution (shaded
     before), the start-up peak annotated."""
     t = cols["t"]
-    steady = _steady(cols)
+    steady = _steady(cols, mech)
     fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True)
-    rows = [("x", "position", 1e3, "mm"), ("vx", "velocity", 1.0, "m/s"), ("ax", "acceleration", 1.0, "m/s$^2$")]
-    for row, (suffix, label, scale, unit) in enumerate(rows):
-        real, ideal = cols[f"{prefix}_{suffix}"] * scale, cols[f"ideal_{prefix}_{suffix}"] * scale
+    for row, (suffix, label, scale, unit) in enumerate(_COORDINATE_ROWS[coordinate]):
+        real, ideal = cols[f"{body}_{suffix}"] * scale, cols[f"ideal_{body}_{suffix}"] * scale
         ax = axes[row, 0]
         ax.plot(t, real, lw=0.7, label="with clearance")
         ax.plot(t, ideal, lw=1.2, ls="--", color="k", label="ideal")
-        ax.set_ylabel(f"{label} x [{unit}]")
+        ax.set_ylabel(f"{label} [{unit}]")
         axes[row, 1].plot(t, real - ideal, lw=0.7, color="C3")
         axes[row, 1].set_ylabel(f"error [{unit}]")
-        if suffix == "ax":
-            _clip_startup(ax, t, [real, ideal], steady, "m/s²")
-            _clip_startup(axes[row, 1], t, [real - ideal], steady, "m/s²")
+        if row == 2:
+            _clip_startup(ax, t, [real, ideal], steady, unit.replace("$^2$", "²"))
+            _clip_startup(axes[row, 1], t, [real - ideal], steady, unit.replace("$^2$", "²"))
+    what = f"{body} centre of mass" if coordinate != "angle" else body
     axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[0, 0].set_title(f"{title}: ideal vs clearance")
-    axes[0, 1].set_title(f"{title}: deviation (clearance - ideal)")
+    axes[0, 0].set_title(f"{what}: ideal vs clearance")
+    axes[0, 1].set_title(f"{what}: deviation (clearance - ideal)")
     for ax in axes[-1]:
         ax.set_xlabel("t [s]")
     fig.tight_layout()
     return fig
 
 
-def _single(cols, series, ylabel, title, unit):
+def _single(cols, mech, series, ylabel, title, unit):
     """One panel of ``series`` (column, label, style) against time, scaled to the motion
     after the first revolution (start-up shaded, its peak annotated)."""
     fig, ax = plt.subplots(figsize=(9, 4))
@@ -92,7 +105,7 @@ def _single(cols, series, ylabel, title, unit):
             color=style.get("color"),
             label=label,
         )
-    _clip_startup(ax, cols["t"], [cols[key] for key, _, _ in series], _steady(cols), unit)
+    _clip_startup(ax, cols["t"], [cols[key] for key, _, _ in series], _steady(cols, mech), unit)
     ax.set_xlabel("t [s]")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -101,35 +114,49 @@ def _single(cols, series, ylabel, title, unit):
     return fig
 
 
-def _contact_forces(cols):
-    """Normal contact force at C (the paper's Fig. 7) and at B, one panel each, scaled to
-    the motion after the first revolution (start-up shaded, its peak annotated)."""
-    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    steady = _steady(cols)
-    for ax, joint, color, what in zip(axes, "CB", ("C0", "C1"), ("paper Fig. 7", "crank pin")):
+def _clearance_joints(mech) -> list[str]:
+    return sorted(j for j, law in mech.joints.items() if not law.ideal)
+
+
+def _contact_forces(cols, mech):
+    """The normal force of each joint with clearance, one panel each, scaled to the motion
+    after the first revolution (start-up shaded, its peak annotated). The annotated
+    start-up peak is the largest stored sample; ``summary.json``'s peaks are over every
+    solver step, so they can be larger."""
+    joints = _clearance_joints(mech)
+    fig, axes = plt.subplots(len(joints), 1, figsize=(9, 3 * len(joints)), sharex=True, squeeze=False)
+    steady = _steady(cols, mech)
+    for k, (ax, joint) in enumerate(zip(axes[:, 0], joints)):
         f = cols[f"force_{joint}_normal"]
-        ax.plot(cols["t"], f, lw=0.6, color=color)
+        ax.plot(cols["t"], f, lw=0.6, color=f"C{k}")
         _clip_startup(ax, cols["t"], [f], steady, "N")
         ax.set_ylabel(f"normal force at {joint} [N]")
-        ax.set_title(f"contact force, joint {joint} ({what})")
-    axes[-1].set_xlabel("t [s]")
+        ax.set_title(f"contact force, joint {joint} (samples; summary.json's peaks are over solver steps)")
+    axes[-1, 0].set_xlabel("t [s]")
     fig.tight_layout()
     return fig
 
 
-def _pin_trajectories(cols, clearances):
-    fig, axes = plt.subplots(1, 2, figsize=(10, 5))
+def _pin_trajectories(cols, mech):
+    """Each clearance joint's pin centre relative to its hole (a guide's slider: lateral
+    offset and tilt times half its length) with the clearance drawn."""
+    joints = _clearance_joints(mech)
+    fig, axes = plt.subplots(1, len(joints), figsize=(5 * len(joints), 5), squeeze=False)
     circle = np.linspace(0, 2 * np.pi, 361)
-    for ax, joint in zip(axes, "BC"):
-        c = clearances[joint] * 1e3
+    for ax, joint in zip(axes[0], joints):
+        c = float(mech.joints[joint].clearance) * 1e3
         ax.plot(cols[f"ecc_{joint}_x"] * 1e3, cols[f"ecc_{joint}_y"] * 1e3, lw=0.5)
         ax.plot(cols[f"ecc_{joint}_x"][:1] * 1e3, cols[f"ecc_{joint}_y"][:1] * 1e3, "go", ms=4, label="start")
-        if c > 0:
+        if "revolute" in mech.joints[joint].kinds:
             ax.plot(c * np.cos(circle), c * np.sin(circle), "k--", lw=1.0, label=f"clearance c = {c:.3g} mm")
-        ax.set_aspect("equal")
+            ax.set_aspect("equal")
+            ax.set_title(f"pin centre relative to bearing centre, joint {joint}")
+        else:
+            for sign in (-1, 1):
+                ax.axhline(sign * c, color="k", ls="--", lw=1.0)
+            ax.set_title(f"slider in its guide, joint {joint} (dashed: clearance {c:.3g} mm)")
         ax.set_xlabel("x [mm]")
         ax.set_ylabel("y [mm]")
-        ax.set_title(f"pin centre relative to bearing centre, joint {joint}")
         ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     return fig
@@ -144,50 +171,66 @@ def _transmission(cols):
     axes[1].plot(cols["t"], cols["transmission_angle"] - cols["ideal_transmission_angle"], lw=0.7, color="C3")
     axes[1].set_ylabel("error [deg]")
     axes[1].set_xlabel("t [s]")
-    axes[0].set_title("transmission angle (paper Fig. 10)")
+    axes[0].set_title("transmission angle")
     fig.tight_layout()
     return fig
 
 
-def figures(cols, clearances) -> dict:
-    """All figures as ``{file name: matplotlib Figure}``. ``cols``: the columns of
-    [`jaxcrank.analysis.outputs.trajectory`][]; ``clearances``: {"B": m, "C": m}.
+def figures(cols, mech) -> dict:
+    """All figures of a run as ``{file name: matplotlib Figure}``. ``cols``: the columns of
+    [`jaxcrank.analysis.outputs.trajectory`][] of a run of ``mech``.
 
-    Accelerations, contact forces and the driving moment are scaled to the motion after
-    the first crank revolution (the start-up impact, about 50 times larger on the paper
-    run, would squash it): the first revolution is shaded and its peak written in the
+    One figure per deviation the mechanism reports (``<body>_<coordinate>.png``: position,
+    velocity, acceleration, ideal against clearance), the output link's acceleration, the
+    contact force of every clearance joint, the driving moment, the pin trajectories in
+    their bearings and the transmission angle. Accelerations, contact forces and the
+    driving moment are scaled to the motion after the first revolution (the start-up
+    impacts would squash it): the first revolution is shaded and its peak written in the
     panel. A run shorter than one revolution is drawn whole."""
-    return {
-        "rod_x.png": _ideal_vs_clearance(cols, "rod", "rod centre (paper Fig. 4)"),
-        "slider_x.png": _ideal_vs_clearance(cols, "slider", "slider (paper Fig. 5)"),
-        "slider_acceleration.png": _single(
+    outputs = mech.linkage().outputs
+    out = {}
+    for body, coordinate in outputs.deviations:
+        out[f"{body}_{coordinate}.png"] = _ideal_vs_clearance(cols, mech, body, coordinate)
+    if outputs.acceleration is not None:
+        body, coordinate = outputs.acceleration
+        suffix, label, _, unit = _COORDINATE_ROWS[coordinate][2]
+        out[f"{body}_acceleration.png"] = _single(
             cols,
-            [("slider_ax", "with clearance", {}), ("ideal_slider_ax", "ideal", {"ls": "--", "color": "k", "lw": 1.2})],
-            "slider acceleration x [m/s$^2$]",
-            "slider acceleration (paper Fig. 6)",
-            "m/s²",
-        ),
-        "contact_force.png": _contact_forces(cols),
-        "driving_moment.png": _single(
-            cols,
+            mech,
             [
-                ("driving_moment", "with clearance", {}),
-                ("ideal_driving_moment", "ideal", {"ls": "--", "color": "k", "lw": 1.2}),
+                (f"{body}_{suffix}", "with clearance", {}),
+                (f"ideal_{body}_{suffix}", "ideal", {"ls": "--", "color": "k", "lw": 1.2}),
             ],
-            "driving moment [N m]",
-            "driving moment (paper Fig. 8)",
-            "N m",
-        ),
-        "pin_trajectories.png": _pin_trajectories(cols, clearances),
-        "transmission_angle.png": _transmission(cols),
-    }
+            f"{body} {label} [{unit}]",
+            f"{body} {label}",
+            unit.replace("$^2$", "²"),
+        )
+    if _clearance_joints(mech):
+        out["contact_force.png"] = _contact_forces(cols, mech)
+    out["driving_moment.png"] = _single(
+        cols,
+        mech,
+        [
+            ("driving_moment", "with clearance", {}),
+            ("ideal_driving_moment", "ideal", {"ls": "--", "color": "k", "lw": 1.2}),
+        ],
+        "driving moment [N m]",
+        "driving moment",
+        "N m",
+    )
+    if _clearance_joints(mech):
+        out["pin_trajectories.png"] = _pin_trajectories(cols, mech)
+    if "transmission_angle" in cols:
+        out["transmission_angle.png"] = _transmission(cols)
+    return out
 
 
-def save_figures(cols, clearances, directory) -> list[Path]:
+def save_figures(cols, mech, directory) -> list[Path]:
+    """Write [`figures`][jaxcrank.runs.plots.figures] as PNG files into ``directory``; returns their paths."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, fig in figures(cols, clearances).items():
+    for name, fig in figures(cols, mech).items():
         path = directory / name
         fig.savefig(path, dpi=120)
         plt.close(fig)

@@ -79,9 +79,11 @@ from ..numerics import shooting
 from ..numerics.shooting import STEADY_DEFAULTS
 from ..numerics.solve import SolveOptions
 from ..physics import model
-from ..physics.params import Mechanism, ParameterError, parameter_unit, set_parameters
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.parameters import set_parameters
+from ..physics.params import ParameterError
 from .sweep_design import MESSAGES, STATUSES, split_valid
-from .sweep_table import append, atomic_write, csv_text, open_table, read_table, table_from_rows
+from .sweep_table import append, atomic_write, csv_text, open_table, parameter_columns, read_table, table_from_rows
 
 #: the regimes (``""``: the design failed or is invalid)
 REGIMES = ("periodic", "not periodic")
@@ -90,11 +92,11 @@ TEXT_COLUMNS = ("status", "message", "regime")
 _TAIL = ["status", "message", "regime", "period_revolutions", "recurrence_distance_scaled", "steps"]
 
 
-def columns(names: Sequence[str]) -> list[str]:
-    """Column names of a regime table over ``names``: ``index``, one ``<name>_<unit>``
-    per parameter, ``status``, ``message``, ``regime``, ``period_revolutions``,
-    ``recurrence_distance_scaled``, ``steps``."""
-    return ["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + _TAIL
+def columns(mech: Mechanism, names: Sequence[str]) -> list[str]:
+    """Column names of a regime table over ``names`` of ``mech``: ``index``, one
+    ``<name>_<unit>`` per parameter, ``status``, ``message``, ``regime``,
+    ``period_revolutions``, ``recurrence_distance_scaled``, ``steps``."""
+    return ["index"] + parameter_columns(mech, names) + _TAIL
 
 
 def _check(settle_revolutions, max_period, recurrence_tol, options, chunk):
@@ -141,7 +143,7 @@ def kernel_sections(base, names, xs, revolutions, options=STEADY_DEFAULTS, threa
     n = len(xs)
     periods = np.array([float(set_parameters(base, list(names), [float(v) for v in x]).period) for x in xs])
     st = source.structure(base, names)
-    y = np.zeros((n, model.state_size(base)))
+    y = engine.initial_states(base, names, xs)
     sections = np.full((n, revolutions + 1, y.shape[1]), np.nan)
     sections[:, 0] = y
     status, accepted, used = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
@@ -228,7 +230,7 @@ def classify(
 
     Args:
         base: the mechanism every design starts from.
-        names: parameter names (see [`jaxcrank.physics.params.set_parameter`][]).
+        names: parameter names (see [`jaxcrank.physics.parameters.set_parameter`][]).
         designs: (N, len(names)) parameter values, SI.
         settle_revolutions: revolutions from rest, integer >= 1 (default 20, as ``steady_state``).
         max_period: the longest period looked for, revolutions, >= 1 (periods up to
@@ -257,7 +259,7 @@ def classify(
     designs = np.atleast_2d(np.asarray(designs, dtype=float))
     if designs.ndim != 2 or designs.shape[1] != len(names):
         raise ParameterError(f"designs must have one column per parameter {names}, got shape {designs.shape}")
-    cols = columns(names)
+    cols = columns(base, names)
     path, done = open_table(out, resume, designs, cols, names, TEXT_COLUMNS)
     if out is not None:
         from .engines import ENGINE_FILE

@@ -18,7 +18,9 @@ USED_SIMULATION_KEYS = ("solver", "rtol", "atol", "max_steps")
 
 REGIMES_SPEC_HELP = """\
 The spec is a `jaxcrank sweep` spec (see `jaxcrank sweep --help`): sampling, samples,
-seed, chunk, [parameters.<name>] and [mechanism] as there. From [simulation] only
+seed, chunk, [parameters.<name>] and mechanism (a preset's name, mechanism = "four-bar",
+or a [mechanism] table) as there; --mechanism, --config or --design give the mechanism
+instead, --set and --rpm change it. From [simulation] only
 solver, rtol, atol and max_steps are used (max_steps: the step budget of a design's
 whole settle); unset, they are the steady-state defaults (tsit5, 1e-10, 1e-10,
 2000000), and the command-line options below override them. revolutions,
@@ -41,7 +43,10 @@ def add_arguments(p):
     )
     p.epilog = REGIMES_SPEC_HELP
     p.formatter_class = argparse.RawDescriptionHelpFormatter
+    from . import config
+
     p.add_argument("--spec", type=Path, required=True, help="sweep spec TOML (see below)")
+    config.add_mechanism_arguments(p, "classify designs of")
     p.add_argument("--out", type=Path, default=Path("runs/regimes"), help="output directory (default runs/regimes)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out where it stopped")
     p.add_argument("--settle-revolutions", type=int, default=20, help="revolutions from rest (20)")
@@ -65,15 +70,17 @@ def add_arguments(p):
     return p
 
 
-def load(path):
-    """(spec, solve options) of a regime run from a sweep spec TOML file."""
+def load(path, arguments=None):
+    """(spec, solve options) of a regime run from a sweep spec TOML file; ``arguments``:
+    command-line options that choose or change its mechanism
+    ([`jaxcrank.runs.spec.base_mechanism`][])."""
     from . import config
-    from .spec import spec_from_dict
+    from .spec import base_mechanism, spec_from_dict
 
     def build(d):
         sim = dict(d.get("simulation", {}))
         changes = {k: sim[k] for k in USED_SIMULATION_KEYS if k in sim}
-        spec = spec_from_dict(d)
+        spec = spec_from_dict(d, base_mechanism(d, arguments))
         options = STEADY_DEFAULTS
         if "solver" in changes:
             from ..numerics.solve import solver_from_name
@@ -84,20 +91,22 @@ def load(path):
     return config.load_toml(path, build)
 
 
-def regime_map(table, names, path: Path) -> Path:
+def regime_map(table, mech, names, path: Path) -> Path:
     """A two-parameter grid's regime map: one cell per design, coloured by its period in
     crank revolutions (periodic), grey (not periodic) or white with a red cross (failed or
     invalid), the period written in the cell; the grid's levels (SI, units on the axes)
-    label the cells, so uneven or logarithmic levels stay readable."""
+    label the cells, so uneven or logarithmic levels stay readable. ``mech``: the base
+    mechanism (the parameters' units)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
 
-    from ..physics.params import parameter_unit
+    from ..physics.parameters import parameter_unit
+    from .sweep_table import parameter_columns
 
-    cols = [f"{n}_{parameter_unit(n)}" for n in names]
+    cols = parameter_columns(mech, names)
     a, b = (np.asarray(table[c]) for c in cols)
     ua, ub = np.unique(a), np.unique(b)
     ia, ib = np.searchsorted(ua, a), np.searchsorted(ub, b)
@@ -118,9 +127,10 @@ def regime_map(table, names, path: Path) -> Path:
                 color="red" if np.isnan(k) else "black", fontsize=9)  # fmt: skip
     ax.set_xticks(np.arange(len(ub)), [f"{v:.4g}" for v in ub], rotation=45 if len(ub) > 6 else 0)
     ax.set_yticks(np.arange(len(ua)), [f"{v:.4g}" for v in ua])
-    ax.set_xlabel(f"{names[1]} ({parameter_unit(names[1])})")
-    ax.set_ylabel(f"{names[0]} ({parameter_unit(names[0])})")
-    ax.set_title("Regime map (x: failed or invalid)" if np.isnan(code).any() else "Regime map")
+    ax.set_xlabel(f"{names[1]} ({parameter_unit(mech, names[1])})")
+    ax.set_ylabel(f"{names[0]} ({parameter_unit(mech, names[0])})")
+    title = f"Regime map, {mech.linkage().name}"
+    ax.set_title(f"{title} (x: failed or invalid)" if np.isnan(code).any() else title)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -130,7 +140,7 @@ def regime_map(table, names, path: Path) -> Path:
 def run(args) -> int:
     from . import regimes
 
-    spec, options = load(args.spec)
+    spec, options = load(args.spec, args)
     options = options.replace(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     if args.threads is not None and args.threads < 1:
         raise ParameterError(f"--threads = {args.threads} must be >= 1")
@@ -160,6 +170,7 @@ def run(args) -> int:
         {
             "sampling": spec.sampling,
             "parameters": spec.names,
+            "mechanism": spec.base.linkage().name,
             "engine": engine,
             "settle_revolutions": args.settle_revolutions,
             "max_period_revolutions": args.max_period,
@@ -177,7 +188,7 @@ def run(args) -> int:
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     written = ["table.csv", "summary.json"]
     if spec.sampling == "grid" and len(spec.names) == 2 and not args.no_figures:
-        regime_map(table, spec.names, out / "regime_map.png")
+        regime_map(table, spec.base, spec.names, out / "regime_map.png")
         written.append("regime_map.png")
     counts = {**summary["regime_counts"], **{k: v for k, v in summary["status_counts"].items() if k != "ok"}}
     print(

@@ -1,7 +1,7 @@
 """Design samplers: tables of designs over named parameters, SI units.
 
 Every sampler returns ``(names, designs)``, the parameter names (any name
-[`jaxcrank.physics.params.set_parameter`][] accepts) and an array of shape
+[`jaxcrank.physics.parameters.set_parameter`][] accepts) and an array of shape
 ``(N, len(names))`` of their values, ready for [`jaxcrank.runs.sweep.run`][] or for a
 design problem (`optim`).
 
@@ -23,7 +23,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from jaxtyping import Float
 
-from ..physics.params import Mechanism, ParameterError, get_parameter
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.parameters import get_parameter
+from ..physics.params import ParameterError
 
 
 def _ranges(ranges: Mapping[str, Sequence[float]]):

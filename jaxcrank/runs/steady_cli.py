@@ -1,5 +1,5 @@
-"""``jaxcrank steady [--config FILE] [--set KEY=VALUE ...] --out DIR``: the steady state
-of a mechanism ([`jaxcrank.numerics.steady.steady_state`][]) with its summary, one
+"""``jaxcrank steady [--mechanism NAME | --config FILE | --design RESULT_JSON] [--set KEY=VALUE ...]
+--out DIR``: the steady state of a mechanism ([`jaxcrank.numerics.steady.steady_state`][]) with its summary, one
 period of the orbit, its figures and a Poincare-section plot."""
 
 from __future__ import annotations
@@ -50,9 +50,10 @@ def _section_eccentricities(steady):
     from ..physics import model
 
     mech = steady.mechanism
+    lk, tree = model.structure(mech)
     out = {}
-    for i, joint in enumerate(model.clearance_joints(mech)):
-        c = float(getattr(mech, f"joint_{joint}").clearance)
+    for i, joint in enumerate(tree.cut):
+        c = float(lk.joints[joint].clearance)
         pts = []
         for n, y in enumerate(np.asarray(steady.section_points)):
             d, _ = model.joint_eccentricities(mech, n * float(mech.period), y)
@@ -109,6 +110,7 @@ def summary(steady, wall: float, args) -> dict:
 
     mult = np.asarray(steady.floquet_multipliers)
     return {
+        "mechanism": steady.mechanism.linkage().name,
         "regime": steady.regime,
         "period_revolutions": steady.period_revolutions,
         "floquet_multipliers": [float(v) for v in np.abs(mult)],
@@ -140,6 +142,7 @@ def run(args) -> int:
     from ..analysis import outputs
     from ..numerics.steady import steady_state
     from . import plots
+    from .cli import _headline_text
 
     mech = config.mechanism_from_arguments(args)
     if not (args.newton_tol > 0):
@@ -167,18 +170,15 @@ def run(args) -> int:
     written = ["config.toml", "summary.json"]
     if steady.orbit is not None:
         cols = outputs.trajectory(steady.orbit)
+        units = outputs.columns(mech)
         with open(out / "orbit.csv", "w", newline="") as fh:
             writer = csv.writer(fh)
-            writer.writerow(list(outputs.COLUMNS))
-            for row in zip(*(cols[k] for k in outputs.COLUMNS)):
+            writer.writerow(list(units))
+            for row in zip(*(cols[k] for k in units)):
                 writer.writerow([f"{v:.10g}" for v in row])
         written.append("orbit.csv")
         if not args.no_figures:
-            clearances = {
-                j: 0.0 if getattr(mech, f"joint_{j}").ideal else float(getattr(mech, f"joint_{j}").clearance)
-                for j in "BC"
-            }
-            plots.save_figures(cols, clearances, out / "figures")
+            plots.save_figures(cols, mech, out / "figures")
             written.append("figures/")
     if not args.no_figures:
         poincare_plot(steady, out / "poincare_section.png")
@@ -191,5 +191,7 @@ def run(args) -> int:
         + f"; |Floquet multipliers| {mods}; Lyapunov exponent {data['lyapunov_exponent_per_s']:.3g} 1/s; "
         f"{wall:.1f} s"
     )
-    print(f"  RMS transmission-angle error = {data['metrics']['rms_transmission_angle_error_deg']:.4f} deg")
+    headline = _headline_text(data["metrics"])
+    if headline:
+        print(f"  {data['metrics_window']}: {headline}")
     return 0

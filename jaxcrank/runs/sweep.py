@@ -1,7 +1,7 @@
 """Sweeps: many designs of one mechanism, one at a time or in ``vmap`` batches.
 
 A sweep is a table of designs over named parameters (any name
-[`jaxcrank.physics.params.set_parameter`][] accepts: ``rod_length``,
+[`jaxcrank.physics.parameters.set_parameter`][] accepts: ``rod_length``,
 ``contact.restitution``, ``clearance_B``, ...), built by a sampler
 ([`full_factorial`][jaxcrank.runs.sampling.full_factorial], [`latin_hypercube`][jaxcrank.runs.sampling.latin_hypercube]
 , [`random_uniform`][jaxcrank.runs.sampling.random_uniform] ,
@@ -43,8 +43,11 @@ and in a batch are two compiled programs that round differently in the last bit,
 which impact chaos amplifies (1e-5..1e-3 relative after 3 ms): a resumed sweep must
 keep its chunk per device on the same side of that line.
 
-The headline metrics are `METRICS` (after the first revolution by default),
-the same numbers ``jaxcrank simulate`` writes to ``summary.json``.
+The headline metrics are the base mechanism's
+([`metric_names`][jaxcrank.runs.sweep_design.metric_names]: named from its description, e.g.
+``max_abs_slider_x_deviation_m`` for the slider-crank, ``max_abs_rocker_angle_deviation_deg``
+for the four-bar), after the first revolution by default: the same numbers
+``jaxcrank simulate`` writes to ``summary.json``.
 
 This module runs a sweep ([`run`][jaxcrank.runs.sweep.run], [`summarize`][jaxcrank.runs.sweep.summarize] ); its parts
 live beside it and
@@ -65,14 +68,15 @@ import numpy as np
 from jaxtyping import ArrayLike, Float, Shaped
 from tqdm.auto import tqdm
 
-from ..analysis.metrics import METRICS
-from ..physics.params import Mechanism, ParameterError
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.params import ParameterError
 from .sweep_design import (
     MESSAGES,
     SOLVE_KEYS,
     STATUSES,
     Settings,
     SweepSettings,
+    metric_names,
     simulate_design,
     split_valid,
     validate,
@@ -86,11 +90,20 @@ from .sweep_dispatch import (
     resolve_chunk,
 )
 from .sweep_dispatch import evaluate as _evaluate
-from .sweep_table import append, atomic_write, columns, csv_text, open_table, read_table, table_from_rows
+from .sweep_table import (
+    append,
+    atomic_write,
+    columns,
+    csv_text,
+    metric_columns,
+    open_table,
+    parameter_columns,
+    read_table,
+    table_from_rows,
+)
 from .sweep_workers import run_in_workers
 
 __all__ = [
-    "METRICS",
     "SOLVE_KEYS",
     "STATUSES",
     "Settings",
@@ -101,6 +114,9 @@ __all__ = [
     "columns",
     "default_chunk",
     "free_device_bytes",
+    "metric_columns",
+    "metric_names",
+    "parameter_columns",
     "read_table",
     "resolve_chunk",
     "run",
@@ -128,7 +144,7 @@ def run(
 
     Args:
         base: the mechanism every design starts from.
-        names: parameter names (see [`jaxcrank.physics.params.set_parameter`][]).
+        names: parameter names (see [`jaxcrank.physics.parameters.set_parameter`][]).
         designs: (N, len(names)) parameter values, SI.
         settings: how each design is simulated (default [`SweepSettings`][jaxcrank.runs.sweep_design.SweepSettings]).
         out: directory for ``table.csv`` and ``designs.npy``, appended after every
@@ -166,7 +182,8 @@ def run(
     designs = np.atleast_2d(np.asarray(designs, dtype=float))
     if designs.shape[1] != len(names):
         raise ParameterError(f"designs must have one column per parameter {names}, got shape {designs.shape}")
-    cols = columns(names)
+    cols = columns(base, names)
+    n_metrics = len(metric_names(base))
     writer = jax.process_index() == 0
     path, done = open_table(out, resume, designs, cols, names, writer=writer)
     if path is not None and writer:
@@ -180,7 +197,7 @@ def run(
 
     def row(i, status, message="", metrics=None, steps=""):
         vals = [repr(float(v)) for v in designs[i]]
-        m = [repr(float(v)) for v in metrics] if metrics is not None else [""] * len(METRICS)
+        m = [repr(float(v)) for v in metrics] if metrics is not None else [""] * n_metrics
         return [i] + vals + [status, message] + m + [steps]
 
     todo, invalid = split_valid(base, names, designs, done)
@@ -237,15 +254,16 @@ def run(
 
 
 def summarize(table: Mapping[str, Shaped[np.ndarray, " designs"]], quantiles=(0.05, 0.5, 0.95)) -> dict:
-    """Per metric over the ``ok`` designs: mean, std, min, max and quantiles; and
-    the count of each status. Units as in the metric names."""
+    """Per metric over the ``ok`` designs (the table's metric columns,
+    [`metric_columns`][jaxcrank.runs.sweep_table.metric_columns]): mean, std, min, max and
+    quantiles; and the count of each status. Units as in the metric names."""
     ok = np.asarray(table["status"]) == "ok"
     out = {
         "designs": int(len(ok)),
         "status_counts": {s: int(np.sum(table["status"] == s)) for s in STATUSES},
         "metrics": {},
     }
-    for k in METRICS:
+    for k in metric_columns(table):
         v = np.asarray(table[k])[ok]
         if v.size == 0:
             continue

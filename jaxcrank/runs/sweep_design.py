@@ -12,9 +12,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ..analysis.metrics import METRICS
 from ..numerics.solve import DEFAULTS, SolveOptions, simulate
-from ..physics.params import Mechanism, ParameterError, set_parameters
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.parameters import set_parameters
+from ..physics.params import ParameterError
+from ..physics.signals import metric_definitions
 from . import config
 
 #: Status of a design in a sweep table; :func:`simulate_design` returns an index into it.
@@ -25,6 +27,13 @@ MESSAGES = {
     "solver_failed": "the solve failed (step size): try solver='kvaerno5' or check the contact parameters",
     "non_finite": "the solve produced non-finite values: check stiffness, memory_time and tolerances",
 }
+
+
+def metric_names(mech: Mechanism) -> tuple[str, ...]:
+    """The headline metrics a sweep over ``mech`` reports, in table order: every metric of
+    [`jaxcrank.physics.signals.metric_definitions`][] (units in the names). A swept
+    parameter never changes them (names come from the description, values are numbers)."""
+    return tuple(metric_definitions(mech))
 
 
 #: the ``[simulation]`` keys of a sweep spec that are :class:`jaxcrank.numerics.solve.SolveOptions` fields
@@ -121,7 +130,8 @@ def simulate_design(
     base: Mechanism, names: Sequence[str], x: Float[ArrayLike, " params"], settings: SweepSettings | None = None
 ) -> tuple[dict[str, Float[Array, ""]], Int[Array, ""], Int[Array, ""]]:
     """One design: ``base`` with ``names`` set to ``x`` (SI), simulated with
-    ``throw=False``. Returns (metrics dict, status code (index into
+    ``throw=False``. Returns (metrics dict in the order of
+    [`metric_names`][jaxcrank.runs.sweep_design.metric_names], status code (index into
     `STATUSES`), accepted steps). Traceable; `run` vmaps it."""
     settings = SweepSettings() if settings is None else settings
     mech = set_parameters(base, names, x)
@@ -136,7 +146,7 @@ def simulate_design(
         metrics_start=settings.metrics_start(mech),
         save_samples=False,
     )
-    m = {k: sim.metrics[k] for k in METRICS}
+    m = {k: sim.metrics[k] for k in metric_names(mech)}
     finite = jnp.all(jnp.isfinite(sim.ys)) & jnp.all(jnp.isfinite(jnp.stack(list(m.values()))))
     status = jnp.where(
         sim.ok, jnp.where(finite, 0, 3), jnp.where(sim.result == diffrax.RESULTS.max_steps_reached, 1, 2)

@@ -15,9 +15,9 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from ..analysis.metrics import METRICS
-from ..physics.params import Mechanism, ParameterError
-from .sweep_design import Settings, simulate_design
+from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.params import ParameterError
+from .sweep_design import Settings, metric_names, simulate_design
 
 
 def _mesh():
@@ -32,7 +32,7 @@ def _batch_fn(names: tuple[str, ...], settings: Settings, batched: bool):
 
     def one(base, x):
         m, status, steps = simulate_design(base, names, x, settings)
-        return jnp.stack([m[k] for k in METRICS]), status, steps
+        return jnp.stack(list(m.values())), status, steps
 
     def shard(base, xs):
         if batched:
@@ -132,7 +132,8 @@ def check_chunk_fits(
 
 
 def evaluate(base, names, settings, xs):
-    """Metrics (n, len(METRICS)), status codes and steps of designs ``xs`` (n, k),
+    """Metrics (n, metrics: [`metric_names`][jaxcrank.runs.sweep_design.metric_names] of ``base``), status
+    codes and steps of designs ``xs`` (n, k),
     with n a multiple of the global device count; every process gets all rows.
 
     The batch is a ``jax.Array`` sharded over all devices of all processes
@@ -151,7 +152,7 @@ def evaluate(base, names, settings, xs):
     batch = jax.make_array_from_process_local_data(sharding, local, xs.shape)
     results = [fn(base, s.data) for s in batch.addressable_shards]  # async, one call per device
     outs = []
-    for k, width in enumerate((len(METRICS), None, None)):
+    for k, width in enumerate((len(metric_names(base)), None, None)):
         shape = (len(xs), width) if width else (len(xs),)
         outs.append(jax.make_array_from_single_device_arrays(shape, sharding, [r[k] for r in results]))
     if jax.process_count() > 1:

@@ -12,16 +12,36 @@ from pathlib import Path
 import numpy as np
 from jaxtyping import Shaped
 
-from ..analysis.metrics import METRICS
 from ..errors import CorruptFileError
-from ..physics.params import parameter_unit
-from .sweep_design import STATUSES
+from ..physics.parameters import parameter_unit
+from .sweep_design import STATUSES, metric_names
 
 
-def columns(names: Sequence[str]) -> list[str]:
-    """Column names of a sweep table over ``names``: ``index``, one ``<name>_<unit>``
-    per parameter, ``status``, ``message``, `METRICS`, ``steps``."""
-    return ["index"] + [f"{n}_{parameter_unit(n)}" for n in names] + ["status", "message"] + list(METRICS) + ["steps"]
+def parameter_columns(mech, names: Sequence[str]) -> list[str]:
+    """The column of each parameter of ``names`` in a table over designs of ``mech``:
+    ``<name>_<unit>`` ([`jaxcrank.physics.parameters.parameter_unit`][]).
+
+    Raises:
+        ParameterError: for a name ``mech`` does not have.
+    """
+    return [f"{n}_{parameter_unit(mech, n)}" for n in names]
+
+
+def columns(mech, names: Sequence[str]) -> list[str]:
+    """Column names of a sweep table over ``names`` of ``mech``: ``index``, one
+    ``<name>_<unit>`` per parameter, ``status``, ``message``, the mechanism's headline
+    metrics ([`metric_names`][jaxcrank.runs.sweep_design.metric_names]), ``steps``."""
+    metrics = list(metric_names(mech))
+    return ["index"] + parameter_columns(mech, names) + ["status", "message"] + metrics + ["steps"]
+
+
+def metric_columns(table) -> list[str]:
+    """The metric columns of a sweep table (the columns between ``message`` and ``steps``),
+    in table order."""
+    keys = list(table)
+    if "message" not in keys:
+        return []
+    return [k for k in keys[keys.index("message") + 1 :] if k != "steps"]
 
 
 #: the text columns of a sweep table (every other column holds numbers)
