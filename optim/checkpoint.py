@@ -39,7 +39,7 @@ def history_columns(problem):
         ["iteration", "objective_deg", "rms_error_deg", "cost_deg"]
         + [f"grad_{n}_deg_per_SI" for n in problem.names]
         + [f"{n}_SI" for n in problem.names]
-        + ["projected_gradient", "step", "halvings", "regime", "leading_multiplier", "seconds"]
+        + ["projected_gradient", "step", "halvings", "evaluations", "regime", "leading_multiplier", "seconds"]
     )
 
 
@@ -49,11 +49,13 @@ def write_history(path: Path, problem, history):
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()
         for h in history:
-            w.writerow({c: h[c] for c in cols})
+            w.writerow({c: h.get(c) for c in cols})  # a history from before a column: empty there
 
 
-def save(out: Path, problem, settings, u, state, history, f0, quiet, converged):
-    """One atomic file holds everything a resume needs; history.csv is a copy for people."""
+def save(out: Path, problem, settings, u, state, history, f0, quiet, converged, stop_reason=None):
+    """One atomic file holds everything a resume needs; history.csv is a copy for people.
+    ``converged``: the convergence test met (or None); ``stop_reason``: why a run that did not
+    converge stopped for good (or None), so that a resume does not repeat it."""
     out.mkdir(parents=True, exist_ok=True)
     meta = {
         "names": list(problem.names),
@@ -61,6 +63,7 @@ def save(out: Path, problem, settings, u, state, history, f0, quiet, converged):
         "f0": f0,
         "quiet": quiet,
         "converged": converged,
+        "stop_reason": stop_reason,
         "history": history,
     }
     arrays = {

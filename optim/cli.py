@@ -11,7 +11,9 @@ and history) and ``multistart.json`` lists the starts; the top-level files descr
 the best run ([`optim.optimize.multistart`][]).
 
 ``result.json`` holds: the problem and method; ``converged`` (true when a stopping
-test was met) and ``stop_reason`` (the test, or the iteration limit); ``iterations``;
+test was met) and ``stop_reason`` (the test, or why the run stopped without meeting one: the
+iteration or time limit, a failed line search, a design outside the periodic regime with a zero
+gradient); ``iterations``; ``evaluations`` (value-and-gradient evaluations);
 the start and final design (``*_design_SI``, the variables' values) and objective
 (deg); ``reduction_percent``; ``final_parameters_SI`` (the mechanism parameters the
 final design sets, by their library names); ``final_mechanism`` (every parameter of
@@ -19,7 +21,7 @@ the final design's mechanism, SI, as in ``config.toml``); ``simulate_command`` (
 command that simulates the final design: ``jaxcrank simulate --design
 DIR/result.json``); ``starts`` (how many starts ran) and, for ``--starts N > 1``,
 ``start_runs`` (each start's result) and ``best_start`` (the index of the best);
-``grid`` (with ``--grid N``) and ``paper`` (the paper's numbers).
+``grid`` (with ``--grid N``) and, for slider-crank problems, ``paper`` (the paper's numbers).
 
 The optimiser's compiled programs are kept in a cache folder ([`jaxcrank.runs.cache`][];
 ``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
@@ -27,10 +29,12 @@ loads them instead of tracing and compiling again.
 
 Config TOML (every key optional)::
 
-    problem = "paper"            # or "tolerance", "robust", "design" (optim/design.py)
+    problem = "paper"            # or "tolerance", "robust", "design" (optim/design.py),
+                                 # "four-bar" (optim/four_bar.py)
     [optimizer]                  # method (optim.optimizers.OPTIMIZERS) and its settings,
     method = "adam"              # then optim.optimize.Settings fields
-    learning_rate = 0.1          # adam; lbfgs takes penalty, max_linesearch_steps
+    learning_rate = 0.1          # adam; lbfgs takes penalty, max_linesearch_steps; projected_lbfgs
+                                 # takes memory_size, max_linesearch_steps, initial_step, ftol
     max_iterations = 30
     starts = 1                   # > 1: the best of several starts (Sobol points, seed)
     [objective]                  # method: "ensemble", "pathwise" or "steady_state"
@@ -49,7 +53,13 @@ Config TOML (every key optional)::
     seed = 0
     stroke = 0.240               # design problem: target stroke, m; also stroke_tolerance,
     weights = [["rms_contact_force_N", 2e-5]]  # min_transmission_deg and term weights
+    min_transmission_deg = 40.0  # four-bar problem: transmission within [40, 140] deg; scale_links
     [mechanism]                  # base mechanism, as in `jaxcrank simulate`'s config.toml
+                                 # (mechanism = "slider-crank", "four-bar", ...)
+
+``final_mechanism`` in result.json is the final design's mechanism in the format of
+[`jaxcrank.runs.config.to_dict`][] (its ``mechanism`` key names the kind), which
+``jaxcrank simulate --design`` reads back.
 """
 
 from __future__ import annotations
@@ -66,6 +76,7 @@ import tomli_w
 from jaxcrank import cache, reference
 from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
+from jaxcrank.physics.presets import SliderCrank
 
 from .objective import AbstractObjective, Ensemble, Pathwise
 from .optimize import Settings, multistart, optimize
@@ -376,8 +387,9 @@ def run(args) -> int:
         "names": list(problem.names),
         "method": settings.optimizer.label,
         "converged": res["converged"] is not None,
-        "stop_reason": res["converged"] or f"iteration limit: max_iterations = {settings.max_iterations}",
+        "stop_reason": res["stop_reason"],
         "iterations": len(hist),
+        "evaluations": res["evaluations"],
         "start_design_SI": [hist[0][f"{n}_SI"] for n in problem.names],
         "start_objective_deg": f_start,
         "final_design_SI": res["final"],
@@ -389,17 +401,7 @@ def run(args) -> int:
         **({"start_runs": res["runs"], "best_start": res["best_start"]} if "runs" in res else {}),
         **({"grid": grid_info} if grid_info else {}),
         "final_regime": _regime(problem, res["final"]) if args.regime else None,
-        "paper": {
-            "optimum_deg": PAPER_OPTIMUM_DEG,
-            "reduction_percent": PAPER_REDUCTION_PCT,
-            "why_ours_differs": (
-                "The paper's ADAMS model is not fully specified (offset e, restitution, friction, "
-                "materials, contact smoothing, evaluation window and sample count are not given; "
-                "model.md lists our readings) and its start design L1 = 150 mm lies outside its own "
-                "box. Our start is the box centre and our window (t_start, t_end]; the objective "
-                "itself is Eq. 19 in degrees."
-            ),
-        },
+        **({"paper": _paper()} if isinstance(problem.base, SliderCrank) else {}),
     }
     (out / "result.json").write_text(json.dumps(result, indent=2))
     print(
@@ -412,13 +414,28 @@ def run(args) -> int:
     return 0
 
 
+def _paper() -> dict:
+    """result.json's ``paper`` entry (slider-crank problems): the paper's numbers and why ours differ."""
+    return {
+        "optimum_deg": PAPER_OPTIMUM_DEG,
+        "reduction_percent": PAPER_REDUCTION_PCT,
+        "why_ours_differs": (
+            "The paper's ADAMS model is not fully specified (offset e, restitution, friction, "
+            "materials, contact smoothing, evaluation window and sample count are not given; "
+            "model.md lists our readings) and its start design L1 = 150 mm lies outside its own "
+            "box. Our start is the box centre and our window (t_start, t_end]; the objective "
+            "itself is Eq. 19 in degrees."
+        ),
+    }
+
+
 def _final_mechanism(problem: Problem, final, out: Path) -> dict:
     """result.json's entries for the final design: its mechanism parameters by their library
     names, the whole mechanism (SI, as config.toml) and the command that simulates it."""
     import numpy as np
 
     x = np.asarray(final, dtype=float)
-    if hasattr(problem, "physical"):  # a DesignProblem: derived variables set several parameters
+    if hasattr(problem, "physical"):  # a reparametrised problem: derived variables set several parameters
         names, values = problem.physical(x)
     else:
         names, values = problem.names, x

@@ -51,10 +51,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from jaxcrank.physics.params import ParameterError, get_parameter, paper, set_parameters
+from jaxcrank.physics.parameters import get_parameter, set_parameters
+from jaxcrank.physics.params import ParameterError
+from jaxcrank.physics.presets import SliderCrank, paper
+from jaxcrank.physics.state import structure
 
 from .objective import EQ19, AbstractObjective, safe_sqrt
-from .problem import AbstractProblem
+from .problem import AbstractProblem, known_parameter
 from .steady import Steady
 
 #: design variables that are not mechanism fields (name -> SI unit)
@@ -66,7 +69,7 @@ TERMS = {
     "rms_rod_x_deviation_m": "RMS of rod-centre x - ideal",
     "rms_slider_x_deviation_m": "RMS of slider x - ideal (the slider's positioning accuracy)",
     "rms_driving_moment_deviation_N_m": "RMS of driving moment - ideal driving moment (clearance-induced fluctuation)",
-    "rms_contact_force_N": "RMS normal contact force over joints B and C (bearing wear proxy)",
+    "rms_contact_force_N": "RMS normal contact force over the clearance joints (bearing wear proxy)",
 }
 
 
@@ -116,14 +119,13 @@ def geometry(l2, alpha, stroke, iterations: int = 64):
     return 0.5 * (a + d), 0.5 * (a - d)
 
 
-def terms(rms: dict) -> dict[str, Float[Array, ""]]:
+def terms(rms: dict, joints: Sequence[str]) -> dict[str, Float[Array, ""]]:
     """The `TERMS` (name -> value in the unit of its name) from the RMS metrics of
     an objective ([`optim.objective.AbstractObjective.rms`][]), by name: the contact
-    force term is the RMS over both joints, ``sqrt((F_B^2 + F_C^2) / 2)``."""
+    force term is the RMS over the clearance ``joints`` (the paper's B and C),
+    ``sqrt(mean_j F_j^2)``."""
     out = {k: rms[k] for k in TERMS if k != "rms_contact_force_N"}
-    out["rms_contact_force_N"] = safe_sqrt(
-        0.5 * (rms["rms_contact_force_B_N"] ** 2 + rms["rms_contact_force_C_N"] ** 2)
-    )
+    out["rms_contact_force_N"] = safe_sqrt(sum(rms[f"rms_contact_force_{j}_N"] ** 2 for j in joints) / len(joints))
     return out
 
 
@@ -142,8 +144,9 @@ class DesignProblem(AbstractProblem):
 
     Variable names: ``rod_length`` and ``min_transmission_angle`` (both required),
     ``rod_inertia_ratio`` (optional, then ``rod_inertia`` is derived), and any other
-    name [`jaxcrank.physics.params.set_parameter`][] accepts except ``crank_length``,
-    ``offset``, ``rod_inertia`` and ``crank_speed`` (derived or fixing the sample grid).
+    name [`jaxcrank.physics.parameters.set_parameter`][] accepts except ``crank_length``,
+    ``offset``, ``rod_inertia`` and ``driver.*`` (derived or fixing the sample grid).
+    The base must be a [`jaxcrank.SliderCrank`][jaxcrank.physics.presets.SliderCrank].
 
     In [`optim.optimize.optimize`][]'s history, ``rms_error_deg`` is the objective
     minus the cost term: the weighted sum of all `TERMS`, not Eq. 19 alone.
@@ -155,16 +158,20 @@ class DesignProblem(AbstractProblem):
     weights: tuple[tuple[str, float], ...] = ()
 
     def check_variable(self, name: str) -> None:
-        if name in ("crank_length", "offset", "crank_speed"):
+        if name in ("crank_length", "offset") or name.startswith("driver."):
             raise ParameterError(
                 f"{name!r} cannot be a DesignProblem variable: crank_length and offset "
                 "follow from the stroke (the geometry's variables are rod_length and min_transmission_angle), "
-                "crank_speed fixes the objective's sample grid"
+                "the driver fixes the objective's sample grid"
             )
         if name not in DERIVED:
-            get_parameter(self.base, name)  # raises on unknown names
+            known_parameter(self.base, name)
 
     def check(self) -> None:
+        if not isinstance(self.base, SliderCrank):
+            raise ParameterError(
+                f"a DesignProblem's base must be a slider-crank (jaxcrank.SliderCrank), not {type(self.base).__name__}"
+            )
         for req in ("rod_length", "min_transmission_angle"):
             if req not in self.names:
                 raise ParameterError(
@@ -280,11 +287,17 @@ class DesignProblem(AbstractProblem):
     # ------------------------------------------------------------------ objective
     def terms(self, x) -> dict[str, Float[Array, ""]]:
         """`TERMS` at SI design ``x`` by the problem's objective (name -> value)."""
-        return terms(self.objective.rms(self.mechanism(x)))
+        return terms(self.objective.rms(self.mechanism(x)), self.clearance_joints)
+
+    @property
+    def clearance_joints(self) -> tuple[str, ...]:
+        """The base mechanism's clearance joints (the tree's cut joints), whose RMS contact
+        forces make the ``rms_contact_force_N`` term."""
+        return structure(self.base)[1].cut
 
     def loss(self, rms: dict) -> Float[Array, ""]:
         w = self.weight_of()
-        t = terms(rms)
+        t = terms(rms, self.clearance_joints)
         return sum(w[k] * t[k] for k in TERMS)
 
     def objective_value(self, x):
@@ -301,7 +314,7 @@ DESIGN_VARIABLES = (
     ("rod_inertia_ratio", 0.05, 0.125, 1.0 / 12.0),
     ("slider_mass", 1.0, 2.5, 1.7964),
     ("friction.coefficient", 0.02, 0.15, 0.1),
-    ("rod_material.youngs_modulus", 100e9, 210e9, 207e9),
+    ("hole_material.youngs_modulus", 100e9, 210e9, 207e9),
 )
 
 #: the design preset's term weights, degrees per unit of each term
@@ -326,7 +339,8 @@ def design_problem(
     mass 1-2.5 kg, rod inertia ratio ``J2 / (m2 L2^2)`` 0.05-0.125 (a uniform bar
     is 1/12), slider mass 1-2.5 kg, the bearings' friction coefficient 0.02-0.15
     (lubricated to dry steel) and the rod bearings' Young's modulus 100-210 GPa
-    (bronze to steel bushings). Minimises Eq. 19 + `DESIGN_WEIGHTS` terms +
+    (bronze to steel bushings; ``hole_material.youngs_modulus``, the rod being the hole at
+    both clearance joints). Minimises Eq. 19 + `DESIGN_WEIGHTS` terms +
     cost. ``objective``: default the steady state ([`optim.steady.Steady`][], the
     terms over one period of the periodic orbit). ``variables``: a subset of the names
     (the others stay at their start values, folded into the base mechanism)."""

@@ -1,10 +1,10 @@
 """The objectives of design problems, in one place: each kind a final Module of
 [`AbstractObjective`][optim.objective.AbstractObjective].
 
-An objective evaluates the RMS metrics of a mechanism
-(`jaxcrank.analysis.metrics.RMS_METRICS`, by name, units in the name: the
-paper's Eq. 19 ``rms_transmission_angle_error_deg`` among them) and decides how their
-gradient is taken. A problem ([`optim.problem`][]) combines them into its value.
+An objective evaluates the RMS metrics of a mechanism (the names its description gives,
+[`jaxcrank.physics.signals.rms_metrics`][], units in the name: the paper's Eq. 19
+``rms_transmission_angle_error_deg`` among them for a mechanism with a transmission angle)
+and decides how their gradient is taken. A problem ([`optim.problem`][]) combines them into its value.
 
 [`Pathwise`][optim.objective.Pathwise]
     One solve from the pins-centred start over the evaluation window ``(t_start,
@@ -24,9 +24,9 @@ gradient is taken. A problem ([`optim.problem`][]) combines them into its value.
     of the implicit function theorem at the orbit ([`optim.steady`][]).
 
 Eq. 19: ``F = sqrt(mean_n (alpha_n - alpha_ideal_n)^2)``, degrees, over samples at
-equal crank-angle steps (the crank turns at constant speed, so equal times are equal
-crank angles and the actual and ideal transmission angles are compared at the same
-crank angle).
+equal crank-angle steps (the windowed objectives need a constant-speed driver, so equal
+times are equal crank angles and the actual and ideal transmission angles are compared at
+the same crank angle).
 """
 
 from __future__ import annotations
@@ -39,9 +39,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from jaxcrank.analysis.metrics import RMS_METRICS
 from jaxcrank.numerics.solve import DEFAULTS
-from jaxcrank.physics.params import Mechanism, ParameterError
+from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
+from jaxcrank.physics.params import ParameterError
+from jaxcrank.physics.signals import rms_metrics
 
 from . import windows as W
 
@@ -68,9 +69,9 @@ class AbstractObjective(eqx.Module):
 
     @abc.abstractmethod
     def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
-        """The RMS metrics of ``mech`` (`jaxcrank.analysis.metrics.RMS_METRICS`:
+        """The RMS metrics of ``mech`` ([`jaxcrank.physics.signals.rms_metrics`][]:
         name -> value in the unit of its name), differentiable with respect to the
-        mechanism's parameters as the kind says. Needs a concrete ``crank_speed``."""
+        mechanism's parameters as the kind says. Needs a concrete ``driver.speed``."""
 
     @abc.abstractmethod
     def forward_mode(self) -> bool:
@@ -232,7 +233,7 @@ class Ensemble(AbstractObjective):
         grid = self.grid(mech)
         mech = jax.lax.stop_gradient(mech)
         sim = W.tracked_solve(mech, grid, self.windows, self._options(), self.throw)
-        exact = {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in RMS_METRICS}
+        exact = {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in rms_metrics(mech)}
         return jax.lax.stop_gradient(exact), W.window_starts(sim)
 
     def window_sums(
@@ -241,8 +242,8 @@ class Ensemble(AbstractObjective):
         """Window ``i`` re-solved for ``mech`` from the carried-over start state: the
         sums of squares of the RMS metrics' signals over its samples (units squared; 0
         where the window failed) and whether it finished. ``grid``: the sample grid of
-        the base design (default [`grid`][optim.objective.Ensemble.grid] of ``mech``, which needs a concrete crank
-        speed)."""
+        the base design (default [`grid`][optim.objective.Ensemble.grid] of ``mech``, which needs a concrete
+        ``driver.speed``)."""
         grid = self.grid(mech) if grid is None else grid
         ts, ys, ok = W.solve_window(
             mech,
@@ -269,7 +270,7 @@ class Ensemble(AbstractObjective):
         exact, starts = self.reference(mech)
         surrogate = self.pooled(mech, starts)
         sg = jax.lax.stop_gradient
-        return {k: exact[k] + (surrogate[k] - sg(surrogate[k])) for k in RMS_METRICS}
+        return {k: exact[k] + (surrogate[k] - sg(surrogate[k])) for k in rms_metrics(mech)}
 
     def forward_mode(self) -> bool:
         return isinstance(self.window_adjoint, diffrax.ForwardMode)

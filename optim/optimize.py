@@ -4,13 +4,17 @@ optimiser Module ([`optim.optimizers`][]), with a checkpoint after every iterati
 The optimiser works on the scaled design ``u`` in the unit box and on the
 objective divided by its value at the start, so step sizes mean the same for any
 problem. Feasibility: every iterate is projected onto the feasible set
-([`project`][optim.problem.AbstractProblem.project], optax projections). An optional
+([`project`][optim.problem.AbstractProblem.project], optax projections); a line-search
+optimiser ([`optim.optimizers.ProjectedLBFGS`][]) projects its trial points too. An optional
 regime guard (``Settings.guard``, [`optim.steady.RegimeGuard`][]) halves a step
-whose design it refuses (a step that leaves the periodic regime), or holds the iterate.
+whose design it refuses (a step that leaves the periodic regime), or holds the iterate;
+for a line-search optimiser a refused trial point fails its Armijo test.
 
-Convergence: the projected-gradient step ``|P(u - g) - u|_inf`` (g the scaled
-gradient) below ``gtol``, or the design moving less than ``xtol`` (scaled) for
-``patience`` consecutive iterations, or ``max_iterations``.
+Convergence: the projected-gradient step ``|P(u - g) - u|_inf`` (g the scaled gradient) below ``gtol``, or the
+design moving less than ``xtol`` (scaled) for ``patience`` consecutive iterations, or (line-search optimisers) an
+accepted step changing the value by at most the optimiser's ``ftol`` relative. The run also stops, not converged,
+at ``max_iterations``, at ``max_seconds``, when a line search fails, and at a design outside the periodic regime
+whose steady-state gradient is exactly zero (no trend estimate; not a stationary point): ``stop_reason`` says which.
 
 Checkpoint: ``checkpoint.npz`` (iterate, optimiser state, history) and ``history.csv``
 are replaced atomically (temporary file and rename) after every iteration;
@@ -41,10 +45,11 @@ from jaxcrank.numerics.solve import SimulationError
 from jaxcrank.physics.params import ParameterError
 
 from . import checkpoint
+from . import quasi_newton as qn
 from .objective import value_and_grad
-from .optimizers import AbstractOptimizer, Projected, adam
+from .optimizers import LBFGS, AbstractLineSearchOptimizer, AbstractOptimizer, adam
 from .problem import AbstractProblem
-from .steady import Steady, SteadyEvaluator
+from .steady import NOT_PERIODIC, Steady, SteadyEvaluator, not_periodic_reason
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,7 +58,7 @@ class Settings:
 
     Attributes:
         optimizer: the optimiser ([`optim.optimizers`][]: ``adam(0.1)`` by default,
-            ``Projected(any optax transformation)`` or ``LBFGS()``).
+            ``Projected(any optax transformation)``, ``LBFGS()`` or ``ProjectedLBFGS()``).
         max_iterations: iteration budget, >= 1.
         gtol: stop when the projected-gradient step is below this.
         xtol: stop when the design moves less than this ``patience`` times in a row.
@@ -63,9 +68,9 @@ class Settings:
         seed: seed of those Sobol points.
         max_seconds: wall-time budget of one [`optimize`][optim.optimize.optimize] call, s (None: none); the
             run stops after the iteration that passes it.
-        guard: optional regime guard ([`optim.steady.RegimeGuard`][]): a step to a
-            design it refuses is halved until accepted (at most ``guard.max_halvings``
-            times, then the iterate is held).
+        guard: optional regime guard ([`optim.steady.RegimeGuard`][]): a step to a design it refuses is halved until
+            accepted (at most ``guard.max_halvings`` times, then the iterate is held); for ``ProjectedLBFGS`` a
+            refused trial point fails the Armijo test (within the line search's own budget).
     """
 
     optimizer: AbstractOptimizer = dataclasses.field(default_factory=adam)
@@ -82,7 +87,7 @@ class Settings:
         if not isinstance(self.optimizer, AbstractOptimizer):
             raise ParameterError(
                 f"optimizer = {self.optimizer!r} must be an optim.optimizers.AbstractOptimizer "
-                "(adam(...), Projected(optax transformation) or LBFGS())"
+                "(adam(...), Projected(optax transformation), LBFGS() or ProjectedLBFGS())"
             )
         if self.max_iterations < 1 or self.gtol < 0 or self.xtol < 0:
             raise ParameterError("max_iterations must be >= 1, gtol and xtol >= 0")
@@ -183,17 +188,20 @@ def optimize(
         stop_after: stop (as if killed) after this many iterations of this call (tests).
 
     Returns a dict: ``history`` (one dict per iteration, columns of
-    [`optim.checkpoint.history_columns`][]), ``converged`` (reason or None), ``f0`` (objective at the
-    start, degrees), ``final`` (the best SI design of the history), ``final_objective``
-    (its objective, degrees) and ``last`` (the last iterate, SI).
+    [`optim.checkpoint.history_columns`][]; ``evaluations``: value-and-gradient evaluations so far, the start's
+    and this iteration's line search included; ``halvings``: the iteration's step shortenings), ``converged`` (the
+    convergence test met, or None), ``stop_reason`` (why the run stopped, converged or not), ``evaluations`` (in
+    all; a resumed line-search run re-evaluates its iterate once, not counted), ``f0`` (objective at the start,
+    degrees), ``final`` (the best SI design of the history), ``final_objective`` (its objective, degrees) and
+    ``last`` (the last iterate, SI).
     """
     opt = settings.optimizer
     penalty = getattr(opt, "penalty", 10.0)
     # the start is not part of the compiled programs: runs from other starts share them
     if isinstance(problem.objective, Steady):
         # evaluated on the host, warm-started from the last orbit (not one compiled program)
-        if not isinstance(opt, Projected):
-            raise ParameterError("the steady-state objective needs a projected optimiser (e.g. adam()), not L-BFGS")
+        if isinstance(opt, LBFGS):
+            raise ParameterError("the steady-state objective needs adam() or ProjectedLBFGS(), not LBFGS()")
         evaluator = SteadyEvaluator(problem)
         vg, extended = _steady_programs(problem, evaluator), None
     else:
@@ -221,30 +229,49 @@ def optimize(
             raise CorruptFileError(
                 f"{ckpt}: the optimiser state does not fit {opt.label} ({err}); the checkpoint is corrupted"
             ) from None
-        quiet, converged = meta["quiet"], meta["converged"]
+        quiet, converged, stop = meta["quiet"], meta["converged"], meta.get("stop_reason")
     else:
         u = problem.start_unit()
         # the objective at the start (degrees) scales the rest; its evaluation is iteration 0's
         first = _checked(problem, u, *vg(u, 1.0))
         f0 = float(first[0])
         first = (first[0] / f0, first[1] / f0)
-        state, history, quiet, converged = opt.init(u), [], 0, None
+        state, history, quiet, converged, stop = opt.init(u), [], 0, None, None
 
-    done_here, started = 0, time.perf_counter()
+    search = isinstance(opt, AbstractLineSearchOptimizer)
+    trial = qn.trial_function(problem, vg, f0, settings.guard, evaluator)
+    carried = None if resume else first  # value and gradient at u when already evaluated
+    evaluations = history[-1].get("evaluations", len(history)) if history else 1
+    done_here, started, interrupted = 0, time.perf_counter(), None
     start_it = len(history)
     bar = tqdm(total=settings.max_iterations, initial=start_it, desc=opt.label, unit="it", disable=not progress)
-    while converged is None and len(history) < settings.max_iterations:
+    while converged is None and stop is None and len(history) < settings.max_iterations:
         tic = time.perf_counter()
-        if not history and not resume:
-            value, grad = first
+        if carried is not None:
+            value, grad = carried
         else:
             value, grad = _checked(problem, u, *vg(u, f0))
+            evaluations += not search  # a line-search optimiser's resume re-evaluates its iterate: not counted
+        carried, halvings = None, 0
         x = problem.from_unit(u)
         proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
-        updates, state = opt.update(grad, state, u, value, f0, extended)
-        u_new = problem.project(optax.apply_updates(u, updates))
-        u_new, halvings = _guarded(problem, settings.guard, evaluator, u, u_new)
         regime = evaluator.last_report if evaluator is not None else {}
+        previous = history[-1]["objective_deg"] / f0 if search and history else None
+        changed = qn.value_change_converged(previous, float(value), opt.ftol) if previous is not None else None
+        if regime.get("regime") == NOT_PERIODIC and not np.any(np.asarray(grad)):
+            stop, u_new = not_periodic_reason(problem, x), u
+        elif search and (proj_step < settings.gtol or changed):
+            u_new = u  # converged (below): no line search
+        elif search:
+            res = opt.step(trial, problem.feasible_set(), np.asarray(u), float(value), np.asarray(grad), state)
+            u_new, state, halvings = jnp.asarray(res.u), res.state, res.trials - int(res.ok)
+            evaluations += res.evaluations
+            carried = (res.value, res.grad) if res.ok else None
+            stop = None if res.ok else qn.failure_reason(res)
+        else:
+            updates, state = opt.update(grad, state, u, value, f0, extended)
+            u_new = problem.project(optax.apply_updates(u, updates))
+            u_new, halvings = _guarded(problem, settings.guard, evaluator, u, u_new)
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))
         grad_si = np.asarray(grad) * f0 / np.asarray(problem.span)
@@ -258,32 +285,42 @@ def optimize(
             "projected_gradient": proj_step,
             "step": step,
             "halvings": halvings,
+            "evaluations": evaluations,
             "regime": regime.get("regime", ""),
             "leading_multiplier": regime.get("leading_multiplier"),
             "seconds": time.perf_counter() - tic,
         }
         history.append(rec)
         quiet = quiet + 1 if step < settings.xtol else 0
-        if proj_step < settings.gtol:
+        if stop is not None:
+            pass
+        elif proj_step < settings.gtol:
             converged = f"projected gradient {proj_step:.2e} < gtol {settings.gtol:g}"
         elif quiet >= settings.patience:
             converged = f"design moved < xtol {settings.xtol:g} for {settings.patience} iterations"
+        elif changed:
+            converged = changed
         else:
             u = u_new
         bar.update(1)
         bar.set_postfix(objective=f"{rec['objective_deg']:.5f}", step=f"{step:.3g}")
         if out is not None:
-            checkpoint.save(Path(out), problem, settings, u, state, history, f0, quiet, converged)
+            checkpoint.save(Path(out), problem, settings, u, state, history, f0, quiet, converged, stop)
         done_here += 1
         if stop_after is not None and done_here >= stop_after:
+            interrupted = f"stopped after {done_here} iterations of this call (stop_after)"
             break
         if settings.max_seconds is not None and time.perf_counter() - started > settings.max_seconds:
+            interrupted = f"time limit: max_seconds = {settings.max_seconds:g}"
             break
     bar.close()
     best = min(history, key=lambda h: h["objective_deg"])
+    limit = f"iteration limit: max_iterations = {settings.max_iterations}"
     return {
         "history": history,
         "converged": converged,
+        "stop_reason": converged or stop or (limit if len(history) >= settings.max_iterations else interrupted),
+        "evaluations": evaluations,
         "f0": f0,
         "final": [best[f"{n}_SI"] for n in problem.names],
         "final_objective": best["objective_deg"],

@@ -9,22 +9,27 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np  # noqa: E402
 
-UNIT = {
-    "crank_length": ("L1", 1e3, "mm"),
-    "rod_length": ("L2", 1e3, "mm"),
-    "offset": ("e", 1e3, "mm"),
-    "clearance_B": ("c_B", 1e3, "mm"),
-    "clearance_C": ("c_C", 1e3, "mm"),
-}
+
+def _unit(name: str) -> tuple[str, float, str]:
+    """(label, factor from SI, unit) of a design variable, by the kind of its name: lengths
+    (``*_length``, ``offset``, ``clearance_<joint>``) in mm, angles of the problem's
+    constraints (``*_transmission_angle``) in degrees, anything else in SI."""
+    if name.startswith("clearance_"):
+        return f"c_{name.removeprefix('clearance_')}", 1e3, "mm"
+    if name.endswith("_length") or name == "offset":
+        return name.removesuffix("_length").replace("_", " "), 1e3, "mm"
+    if name.endswith("_transmission_angle"):
+        return name.replace("_", " "), 180.0 / np.pi, "deg"
+    return name, 1.0, "SI"
 
 
 def label(name):
-    short, _, unit = UNIT.get(name, (name, 1.0, "SI"))
+    short, _, unit = _unit(name)
     return f"{short} [{unit}]"
 
 
 def factor(name):
-    return UNIT.get(name, (name, 1.0, ""))[1]
+    return _unit(name)[1]
 
 
 def plot_scans(csv_path: Path, report: dict, png: Path):

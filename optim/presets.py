@@ -4,10 +4,86 @@ objective instance as its ``objective`` keyword."""
 
 from __future__ import annotations
 
-from .design import design_problem
-from .problem import paper_problem, robust_problem, tolerance_problem
+import dataclasses
+from collections.abc import Sequence
 
-PROBLEMS = {"paper": paper_problem, "tolerance": tolerance_problem, "robust": robust_problem, "design": design_problem}
+from jaxcrank.physics.presets import paper
+
+from .design import design_problem
+from .four_bar import four_bar_problem
+from .objective import AbstractObjective, Ensemble
+from .problem import ParameterProblem
+
+
+def paper_problem(objective: AbstractObjective = Ensemble(), start: Sequence[float] | None = None) -> ParameterProblem:
+    """The paper's problem (Eq. 19): L1 in [110, 130] mm, L2 in [390, 410] mm,
+    ``L2 >= L1 + e`` (written ``L1 - L2 <= -e``), offset e fixed at the preset's 50 mm.
+    Start: the box centre (L1 = 120, L2 = 400 mm); the paper's own design (L1 = 150
+    mm) lies outside its stated box."""
+    base = paper()
+    e = float(base.offset)
+    return ParameterProblem(
+        base=base,
+        names=("crank_length", "rod_length"),
+        lower=(0.110, 0.390),
+        upper=(0.130, 0.410),
+        A=((1.0, -1.0),),
+        b=(-e,),
+        start=(0.120, 0.400) if start is None else tuple(start),
+        objective=objective,
+        title="paper: RMS transmission-angle error over L1, L2",
+    )
+
+
+def tolerance_problem(
+    objective: AbstractObjective = Ensemble(), cost_weight: float = 0.005, start: Sequence[float] | None = None
+) -> ParameterProblem:
+    """Tolerance allocation: radial clearances c_B, c_C in [0.1, 0.5] mm at the
+    paper's geometry, minimising RMS transmission-angle error + manufacturing cost
+    ([`AbstractProblem.cost`][optim.problem.AbstractProblem.cost], reference clearance 0.5 mm). Start: 0.4 mm at
+    both."""
+    return ParameterProblem(
+        base=paper(),
+        names=("clearance_B", "clearance_C"),
+        lower=(1e-4, 1e-4),
+        upper=(5e-4, 5e-4),
+        start=(4e-4, 4e-4) if start is None else tuple(start),
+        objective=objective,
+        cost_weight=cost_weight,
+        cost_reference=5e-4,
+        title="tolerance allocation: RMS error + reciprocal clearance cost",
+    )
+
+
+#: the robust problem's default manufacturing scatter: lengths +-0.05 mm (normal, +-3 sigma),
+#: clearances +-0.05 mm (uniform) about the preset's 0.5 mm
+ROBUST_SCATTER = (
+    ("crank_length", 5e-5, "normal"),
+    ("rod_length", 5e-5, "normal"),
+    ("clearance_B", 5e-5, "uniform"),
+    ("clearance_C", 5e-5, "uniform"),
+)
+
+
+def robust_problem(
+    objective: AbstractObjective = Ensemble(), samples: int = 8, seed: int = 0, start: Sequence[float] | None = None
+) -> ParameterProblem:
+    """The paper's L1, L2 problem under manufacturing tolerances: minimise the
+    expected RMS transmission-angle error over ``samples`` parts drawn from
+    `ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
+    p = paper_problem(objective, start)
+    return dataclasses.replace(
+        p, scatter=ROBUST_SCATTER, samples=samples, seed=seed, title="robust: expected RMS transmission-angle error"
+    )
+
+
+PROBLEMS = {
+    "paper": paper_problem,
+    "tolerance": tolerance_problem,
+    "robust": robust_problem,
+    "design": design_problem,
+    "four-bar": four_bar_problem,
+}
 
 
 #: Reference designs of the nine-variable design problem (``design_problem``), SI values in

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
@@ -29,7 +28,9 @@ import numpy as np
 import optax
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from jaxcrank.physics.params import Mechanism, ParameterError, get_parameter, paper, parameter_value, set_parameters
+from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
+from jaxcrank.physics.parameters import get_parameter, parameter_value, set_parameters
+from jaxcrank.physics.params import ParameterError
 from jaxcrank.runs.sampling import Tolerance, monte_carlo
 
 from .objective import EQ19, AbstractObjective, Ensemble, value_and_grad
@@ -52,13 +53,15 @@ class AbstractProblem(abc.ABC):
         cost_reference: reference clearance of the cost term, m.
         title: a short description for plots and reports (see [`description`][optim.problem.AbstractProblem.description]
             ).
+        base_key: ``base`` as a hashable value ([`mechanism_key`][optim.problem.mechanism_key]; a mechanism's
+            joints are a dict), set on construction; problems compare and hash by it.
 
     Raises:
         ParameterError: on construction, for inconsistent sizes, empty bounds, an
             unknown variable, a negative cost weight or one without clearance variables.
     """
 
-    base: Mechanism
+    base: Mechanism = dataclasses.field(compare=False)
     names: tuple[str, ...]
     lower: tuple[float, ...]
     upper: tuple[float, ...]
@@ -69,8 +72,10 @@ class AbstractProblem(abc.ABC):
     cost_weight: float = 0.0
     cost_reference: float = 5e-4
     title: str = ""
+    base_key: tuple = dataclasses.field(default=(), init=False, repr=False)
 
     def __post_init__(self):
+        object.__setattr__(self, "base_key", mechanism_key(self.base))
         n = len(self.names)
         if n == 0:
             raise ParameterError("a design problem needs at least one variable")
@@ -92,7 +97,7 @@ class AbstractProblem(abc.ABC):
         if self.cost_weight < 0:
             raise ParameterError(f"cost_weight = {self.cost_weight:g} must be >= 0")
         if self.cost_weight > 0 and not any(nm.startswith("clearance_") for nm in self.names):
-            raise ParameterError("cost_weight > 0 needs clearance_B or clearance_C among the variables")
+            raise ParameterError("cost_weight > 0 needs a clearance variable (clearance_<joint>) among the variables")
         if self.start is not None and len(self.start) != n:
             raise ParameterError(f"start needs {n} values")
         self.check()
@@ -162,27 +167,25 @@ class AbstractProblem(abc.ABC):
             ok &= x @ np.asarray(row) <= bound + tol
         return ok
 
+    def scaled_constraints(self) -> tuple[np.ndarray, np.ndarray]:
+        """The linear constraints on the scaled design, ``A_u u <= b_u``: (m, n) and (m,),
+        dimensionless (``A_u = A diag(upper - lower)``, ``b_u = b - A lower``)."""
+        a = np.asarray(self.A, dtype=float).reshape(len(self.A), self.n)
+        lo = np.asarray(self.lower, dtype=float)
+        return a * (np.asarray(self.upper, dtype=float) - lo), np.asarray(self.b, dtype=float) - a @ lo
+
+    def feasible_set(self) -> FeasibleSet:
+        """The scaled feasible set, ``[0, 1]^n`` intersected with ``A_u u <= b_u``."""
+        return FeasibleSet(*self.scaled_constraints())
+
     def project(self, u: Float[ArrayLike, " n"], iterations: int = 100) -> Float[Array, " n"]:
         """Euclidean projection of the scaled design ``u`` onto the scaled feasible set."""
         u = jnp.asarray(u, dtype=float)
-        box = lambda v: optax.projections.projection_box(v, 0.0, 1.0)  # noqa: E731
         if not self.A:
-            return box(u)
+            return optax.projections.projection_box(u, 0.0, 1.0)
         lo, span = jnp.asarray(self.lower), self.span
         rows = [(jnp.asarray(r) * span, bnd - jnp.dot(jnp.asarray(r), lo)) for r, bnd in zip(self.A, self.b)]
-        sets = [box] + [lambda v, a=a, c=c: optax.projections.projection_halfspace(v, a, c) for a, c in rows]
-
-        def sweep(carry, _):  # Dykstra's alternating projections with corrections
-            v, corr = carry
-            new = []
-            for proj, p in zip(sets, corr):
-                w = proj(v + p)
-                new.append(v + p - w)
-                v = w
-            return (v, tuple(new)), None
-
-        (v, _), _ = jax.lax.scan(sweep, (u, tuple(jnp.zeros_like(u) for _ in sets)), None, length=iterations)
-        return v
+        return project_polyhedron(u, rows, iterations)
 
     def start_unit(self) -> Float[Array, " n"]:
         """Scaled, projected start design."""
@@ -206,10 +209,85 @@ class AbstractProblem(abc.ABC):
         return dataclasses.replace(self, objective=objective)
 
 
+def mechanism_key(mech: Mechanism) -> tuple:
+    """A hashable, picklable value that identifies a mechanism: its tree structure (as text:
+    kinds, laws, names) and its leaves' dtypes, shapes and bytes."""
+    leaves, treedef = jax.tree.flatten(mech)
+    return str(treedef), tuple((np.asarray(v).dtype.str, np.shape(v), np.asarray(v).tobytes()) for v in leaves)
+
+
+def known_parameter(base: Mechanism, name: str) -> None:
+    """Raise ParameterError (``unknown design variable ...``, with the reason) unless ``name``
+    is a numeric parameter of ``base`` ([`jaxcrank.physics.parameters.get_parameter`][])."""
+    try:
+        get_parameter(base, name)
+    except ParameterError as err:
+        raise ParameterError(f"unknown design variable {name!r}: {err}") from None
+
+
+def project_polyhedron(u: Float[ArrayLike, " n"], rows, iterations: int = 100) -> Float[Array, " n"]:
+    """Euclidean projection of ``u`` (n,) onto the unit box intersected with the
+    half-spaces ``a . u <= c`` of ``rows`` (a sequence of ``(a (n,), c)``): the box and
+    half-space projections of ``optax.projections`` combined by Dykstra's alternating
+    projections with corrections, ``iterations`` sweeps (the result is the last
+    half-space's projection; exact for one active half-space). Traceable."""
+    box = lambda v: optax.projections.projection_box(v, 0.0, 1.0)
+    sets = [box] + [lambda v, a=a, c=c: optax.projections.projection_halfspace(v, a, c) for a, c in rows]
+
+    def sweep(carry, _):  # Dykstra's alternating projections with corrections
+        v, corr = carry
+        new = []
+        for proj, p in zip(sets, corr):
+            w = proj(v + p)
+            new.append(v + p - w)
+            v = w
+        return (v, tuple(new)), None
+
+    (v, _), _ = jax.lax.scan(sweep, (u, tuple(jnp.zeros_like(u) for _ in sets)), None, length=iterations)
+    return v
+
+
+@jax.jit
+def _project_jit(u, a, c):
+    return project_polyhedron(u, list(zip(a, c))) if a.shape[0] else optax.projections.projection_box(u, 0.0, 1.0)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FeasibleSet:
+    """A scaled feasible set: the unit box ``[0, 1]^n`` intersected with the half-spaces
+    ``A u <= b`` (dimensionless), with its projection and its constraints as rows, for
+    optimisers that need the constraints' normals ([`optim.quasi_newton`][]).
+
+    Attributes:
+        A: half-space normals, (m, n) (m = 0: the box alone).
+        b: half-space bounds, (m,).
+    """
+
+    A: np.ndarray
+    b: np.ndarray
+
+    @property
+    def n(self) -> int:
+        """Number of variables."""
+        return int(np.shape(self.A)[1])
+
+    def project(self, u: Float[ArrayLike, " n"]) -> np.ndarray:
+        """Euclidean projection of ``u`` onto the set ([`project_polyhedron`][optim.problem.project_polyhedron],
+        compiled once per shape), numpy float64."""
+        return np.asarray(_project_jit(jnp.asarray(u, dtype=float), jnp.asarray(self.A), jnp.asarray(self.b)))
+
+    def rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every constraint as a row of ``G u <= h``: ``u_i <= 1``, then ``-u_i <= 0``, then ``A u <= b``;
+        shapes (2n + m, n) and (2n + m,)."""
+        eye = np.eye(self.n)
+        g = np.concatenate([eye, -eye, np.asarray(self.A, dtype=float)])
+        return g, np.concatenate([np.ones(self.n), np.zeros(self.n), np.asarray(self.b, dtype=float)])
+
+
 @dataclasses.dataclass(frozen=True)
 class ParameterProblem(AbstractProblem):
     """Mechanism parameters as the variables (any name
-    [`jaxcrank.physics.params.set_parameter`][] accepts), Eq. 19 as the value, and
+    [`jaxcrank.physics.parameters.set_parameter`][] accepts), Eq. 19 as the value, and
     optionally the mean over manufactured parts (robust design).
 
     Attributes (besides [`AbstractProblem`][optim.problem.AbstractProblem]'s):
@@ -231,7 +309,7 @@ class ParameterProblem(AbstractProblem):
     seed: int = 0
 
     def check_variable(self, name: str) -> None:
-        get_parameter(self.base, name)  # raises on unknown names
+        known_parameter(self.base, name)
 
     def check(self) -> None:
         if self.samples < 0:
@@ -242,12 +320,12 @@ class ParameterProblem(AbstractProblem):
             if len(entry) != 3:
                 raise ParameterError(f"scatter entry {entry!r} must be (name, tolerance, distribution)")
             name, tol, dist = entry
-            get_parameter(self.base, name)  # raises on unknown names
+            known_parameter(self.base, name)
             Tolerance(0.0, float(tol), dist)  # checks tolerance >= 0 and the distribution
-            if name == "crank_speed":
+            if name.startswith("driver."):
                 raise ParameterError(
-                    "scatter of crank_speed is not supported: the objective's sample grid "
-                    "(equal crank angles) needs one crank speed for all parts"
+                    f"scatter of {name} is not supported: the objective's sample grid "
+                    "(equal crank angles) needs one driver for all parts"
                 )
         if len({e[0] for e in self.scatter}) != len(self.scatter):
             raise ParameterError("scatter names a parameter twice")
@@ -306,65 +384,3 @@ class ParameterProblem(AbstractProblem):
             return self.loss(self.objective.rms(self.mechanism(x))) + self.cost(x)
         parts = jax.vmap(lambda d: self.loss(self.objective.rms(self.part(x, d))))(jnp.asarray(self.draws()))
         return jnp.mean(parts) + self.cost(x)
-
-
-def paper_problem(objective: AbstractObjective = Ensemble(), start: Sequence[float] | None = None) -> ParameterProblem:
-    """The paper's problem (Eq. 19): L1 in [110, 130] mm, L2 in [390, 410] mm,
-    ``L2 >= L1 + e`` (written ``L1 - L2 <= -e``), offset e fixed at the preset's 50 mm.
-    Start: the box centre (L1 = 120, L2 = 400 mm); the paper's own design (L1 = 150
-    mm) lies outside its stated box."""
-    base = paper()
-    e = float(base.offset)
-    return ParameterProblem(
-        base=base,
-        names=("crank_length", "rod_length"),
-        lower=(0.110, 0.390),
-        upper=(0.130, 0.410),
-        A=((1.0, -1.0),),
-        b=(-e,),
-        start=(0.120, 0.400) if start is None else tuple(start),
-        objective=objective,
-        title="paper: RMS transmission-angle error over L1, L2",
-    )
-
-
-def tolerance_problem(
-    objective: AbstractObjective = Ensemble(), cost_weight: float = 0.005, start: Sequence[float] | None = None
-) -> ParameterProblem:
-    """Tolerance allocation: radial clearances c_B, c_C in [0.1, 0.5] mm at the
-    paper's geometry, minimising RMS transmission-angle error + manufacturing cost
-    ([`AbstractProblem.cost`][optim.problem.AbstractProblem.cost], reference clearance 0.5 mm). Start: 0.4 mm at
-    both."""
-    return ParameterProblem(
-        base=paper(),
-        names=("clearance_B", "clearance_C"),
-        lower=(1e-4, 1e-4),
-        upper=(5e-4, 5e-4),
-        start=(4e-4, 4e-4) if start is None else tuple(start),
-        objective=objective,
-        cost_weight=cost_weight,
-        cost_reference=5e-4,
-        title="tolerance allocation: RMS error + reciprocal clearance cost",
-    )
-
-
-#: the robust problem's default manufacturing scatter: lengths +-0.05 mm (normal, +-3 sigma),
-#: clearances +-0.05 mm (uniform) about the preset's 0.5 mm
-ROBUST_SCATTER = (
-    ("crank_length", 5e-5, "normal"),
-    ("rod_length", 5e-5, "normal"),
-    ("clearance_B", 5e-5, "uniform"),
-    ("clearance_C", 5e-5, "uniform"),
-)
-
-
-def robust_problem(
-    objective: AbstractObjective = Ensemble(), samples: int = 8, seed: int = 0, start: Sequence[float] | None = None
-) -> ParameterProblem:
-    """The paper's L1, L2 problem under manufacturing tolerances: minimise the
-    expected RMS transmission-angle error over ``samples`` parts drawn from
-    `ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
-    p = paper_problem(objective, start)
-    return dataclasses.replace(
-        p, scatter=ROBUST_SCATTER, samples=samples, seed=seed, title="robust: expected RMS transmission-angle error"
-    )

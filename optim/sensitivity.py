@@ -1,8 +1,9 @@
 """Local sensitivities of the mean-square metrics by AD, in one call.
 
-``sensitivities(mech)`` gives, at one design, the value of each metric in
-`METRICS` and its gradient with respect to every parameter in ``names``
-(any name [`jaxcrank.physics.params.set_parameter`][] accepts), plus the normalised
+``sensitivities(mech)`` gives, at one design, the value of each of the mechanism's RMS
+metrics ([`metric_names`][optim.sensitivity.metric_names]) and its gradient with respect to every parameter in
+``names`` (any name [`jaxcrank.physics.parameters.set_parameter`][] accepts; default
+[`default_parameters`][optim.sensitivity.default_parameters]), plus the normalised
 elasticities ``(dm/dp) (p / m)`` (percent change of the metric per percent change
 of the parameter), which [`optim.plots.plot_tornado`][] draws as a tornado chart.
 
@@ -17,8 +18,8 @@ differentiated (forward mode by default, one tangent per parameter;
 ensemble mean is taken.
 
 Valid for: time averages of squares, i.e. the RMS metrics (transmission-angle
-error, rod-centre and slider x deviation, driving-moment deviation, contact forces
-at B and C). Not valid for: peaks (largest contact force, largest deviation,
+error, the output deviations, driving-moment deviation, the joints' contact forces).
+Not valid for: peaks (largest contact force, largest deviation,
 largest acceleration): an extreme value over chaotic impacts has no trend-following
 local derivative (use a sweep over a band, [`jaxcrank.runs.sweep`][], for those).
 """
@@ -32,38 +33,52 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from jaxcrank import metrics
 from jaxcrank.numerics.solve import Simulation
-from jaxcrank.physics.params import Mechanism, get_parameter, parameter_unit, set_parameters
+from jaxcrank.physics import model
+from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
+from jaxcrank.physics.parameters import get_parameter, parameter_unit, set_parameters
+from jaxcrank.physics.params import ParameterError
+from jaxcrank.physics.signals import rms_metrics
 
 from . import windows as W
-from .objective import Ensemble
+from .objective import EQ19, Ensemble
 
-#: metrics whose gradient the ensemble estimate follows: the RMS metrics of
-#: :mod:`jaxcrank.analysis.metrics` (units in the suffix); the rows of the results below
-METRICS = metrics.RMS_METRICS
+#: the joint-law parameters among the default parameters, each tied over the joints that have it
+TIED_PARAMETERS = ("contact.restitution", "friction.coefficient", "hole_material.youngs_modulus")
 
-#: default parameters: the physical design and operating parameters (not the smoothing widths)
-PARAMETERS = (
-    "crank_length",
-    "rod_length",
-    "offset",
-    "rod_mass",
-    "slider_mass",
-    "rod_inertia",
-    "crank_speed",
-    "clearance_B",
-    "clearance_C",
-    "contact.restitution",
-    "friction.coefficient",
-    "rod_material.youngs_modulus",
-)
+
+def metric_names(mech: Mechanism) -> tuple[str, ...]:
+    """The metrics whose gradient the ensemble estimate follows: the mechanism's RMS metrics
+    ([`jaxcrank.physics.signals.rms_metrics`][], units in the suffix); the rows of the results below."""
+    return rms_metrics(mech)
+
+
+def default_parameters(mech: Mechanism) -> tuple[str, ...]:
+    """The physical design and operating parameters of ``mech`` (not the smoothing widths):
+    the description's own numbers (lengths, masses, inertias; not gravity), ``driver.speed``,
+    ``clearance_<joint>`` of every clearance joint and the tied joint-law parameters of
+    `TIED_PARAMETERS` that some joint has."""
+    import dataclasses
+
+    def number(v):
+        return not isinstance(v, bool) and isinstance(v, float | int | np.floating | jax.Array) and np.ndim(v) == 0
+
+    own = [f.name for f in dataclasses.fields(mech) if f.name != "gravity" and number(getattr(mech, f.name))]
+    _, tree = model.structure(mech)
+    names = [*own, "driver.speed", *(f"clearance_{j}" for j in tree.cut)]
+    for name in TIED_PARAMETERS:
+        try:
+            get_parameter(mech, name)
+        except ParameterError:
+            continue
+        names.append(name)
+    return tuple(names)
 
 
 def metric_values(sim: Simulation) -> Float[Array, " metrics"]:
-    """`METRICS` that a solve tracked (``simulate(..., metrics_start=...)``,
-    [`jaxcrank.numerics.tracking`][]), stacked in the order of `METRICS`, in their units."""
-    return jnp.stack([sim.metrics[k] for k in METRICS])
+    """The metrics of [`metric_names`][optim.sensitivity.metric_names] that a solve tracked
+    (``simulate(..., metrics_start=...)``, [`jaxcrank.numerics.tracking`][]), stacked in that order, in their units."""
+    return jnp.stack([sim.metrics[k] for k in metric_names(sim.mechanism)])
 
 
 def window_sums(
@@ -72,22 +87,24 @@ def window_sums(
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
     carried-over start state ([`optim.objective.Ensemble.window_sums`][]): the sums of
     squares of the metrics' signals over its samples, stacked in the order of
-    `METRICS` (units squared), and whether it finished."""
+    [`metric_names`][optim.sensitivity.metric_names] (units squared), and whether it finished."""
     sums, ok = obj.window_sums(set_parameters(base, names, x), starts, i, obj.grid(base))
-    return jnp.stack([sums[k] for k in METRICS]), ok
+    return jnp.stack([sums[k] for k in metric_names(base)]), ok
 
 
-def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Ensemble = Ensemble()) -> dict:
-    """Values, gradients and elasticities of `METRICS` at ``mech`` over the
-    objective's window (``obj``: window, ensemble windows, solver, tolerances).
+def sensitivities(mech: Mechanism, names: Sequence[str] | None = None, obj: Ensemble = Ensemble()) -> dict:
+    """Values, gradients and elasticities of the metrics of
+    [`metric_names`][optim.sensitivity.metric_names] at ``mech`` over the objective's window (``obj``: window,
+    ensemble windows, solver, tolerances), with respect to ``names`` (default
+    [`default_parameters`][optim.sensitivity.default_parameters]).
 
     Returns a dict: ``names``, ``units`` (of each parameter), ``x`` (SI values),
-    ``metrics`` (names), ``value`` (6,) exact metric values, ``gradient`` (6, P)
+    ``metrics`` (names, M of them), ``value`` (M,) exact metric values, ``gradient`` (M, P)
     in metric unit per parameter unit (0 for a metric that is 0 over every window),
-    ``elasticity`` (6, P) dimensionless (0 for a metric whose value is 0),
+    ``elasticity`` (M, P) dimensionless (0 for a metric whose value is 0),
     ``windows`` and ``windows_ok`` (ensemble size and how many finished)."""
-    names = list(names)
-    units = [parameter_unit(n) for n in names]
+    names = list(default_parameters(mech) if names is None else names)
+    units = [parameter_unit(mech, n) for n in names]
     grid = obj.grid(mech)  # concrete sample grid of the design (crank speed may be a variable below)
     n_window, dt = grid.n_window, grid.dt
     # the metrics over the samples in (t_start, t_end] tracked during the solve, which
@@ -131,7 +148,7 @@ def sensitivities(mech: Mechanism, names: Sequence[str] = PARAMETERS, obj: Ensem
         "names": names,
         "units": units,
         "x": x,
-        "metrics": list(METRICS),
+        "metrics": list(metric_names(mech)),
         "value": value,
         "gradient": gradient,
         "elasticity": np.where(nonzero, gradient * x[None, :] / np.where(nonzero, value[:, None], 1.0), 0.0),
@@ -167,7 +184,7 @@ def window_gradients(mech: Mechanism, starts: W.Starts, obj: Ensemble = Ensemble
 
     def one(p, i):
         sums, ok = obj.window_sums(eqx.combine(p, static), starts, i, grid)
-        return sums["rms_transmission_angle_error_deg"], ok
+        return sums[EQ19], ok
 
     (sq, ok), grads = W.over_windows(lambda i: jax.value_and_grad(one, has_aux=True)(params, i), starts)
     return sq, ok, grads

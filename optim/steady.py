@@ -35,11 +35,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from jaxcrank.analysis.metrics import RMS_METRICS
 from jaxcrank.numerics import steady as S
 from jaxcrank.numerics.shooting import STEADY_DEFAULTS, period_solve
 from jaxcrank.numerics.solve import SolveOptions
-from jaxcrank.physics.params import Mechanism, ParameterError
+from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
+from jaxcrank.physics.params import ParameterError
+from jaxcrank.physics.signals import rms_metrics
 
 from .objective import AbstractObjective, Ensemble, value_and_grad
 
@@ -126,8 +127,9 @@ class Steady(AbstractObjective):
         metrics over one period from [`jaxcrank.numerics.steady.orbit_start`][] (exact
         forward-mode gradient); not periodic, the long-run statistics' values with the
         ``trend`` objective's gradient (or none); NaN when the solve failed."""
+        names = rms_metrics(mech)
         if not steady.ok:
-            return {k: jnp.asarray(jnp.nan) for k in RMS_METRICS}
+            return {k: jnp.asarray(jnp.nan) for k in names}
         if steady.periodic:
             orbit = _light(steady)
             sim = period_solve(
@@ -137,14 +139,14 @@ class Steady(AbstractObjective):
                 options=orbit.options,
                 samples_per_revolution=self.samples_per_revolution,
             )
-            return {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in RMS_METRICS}
-        values = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in RMS_METRICS}
+            return {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in names}
+        values = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in names}
         if self.trend is None:
             return values
         sg = jax.lax.stop_gradient
         _, starts = self.trend.reference(sg(mech))
         surrogate = self.trend.pooled(mech, starts)
-        return {k: values[k] + (surrogate[k] - sg(surrogate[k])) for k in RMS_METRICS}
+        return {k: values[k] + (surrogate[k] - sg(surrogate[k])) for k in names}
 
     def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
         """The RMS metrics of a concrete ``mech`` ([`solve`][optim.steady.Steady.solve] then
@@ -225,12 +227,17 @@ class SteadyEvaluator:
         self.last_report = {}  # report() of the last evaluated design
 
     def steady_at(self, x) -> S.SteadyState:
-        """The steady state at SI design ``x`` (cached for the last few designs)."""
+        """The steady state at SI design ``x`` (cached for the last few designs), warm-started
+        from the last periodic one. A warm-started solve that finds no attracting orbit
+        without a full settle (its shooting from the carried-over state met an unstable
+        orbit) is classified again from rest: the regime is the motion's from rest."""
         key = tuple(float(v) for v in np.asarray(x, dtype=float))
         if key not in self._steady:
             mech = self.problem.mechanism(jnp.asarray(key))
-            warm = self.last if self.last is not None else None
-            steady = self.objective.solve(mech, warm_start=warm)
+            steady = self.objective.solve(mech, warm_start=self.last)
+            settled = steady.revolutions.get("settle", 0) >= self.objective.settle_revolutions
+            if self.last is not None and not steady.periodic and not settled:
+                steady = self.objective.solve(mech)
             if steady.periodic:
                 self.last = steady
             if len(self._steady) >= 4:
@@ -246,10 +253,11 @@ class SteadyEvaluator:
         info = self.last_report = report(steady)
         if not steady.ok:
             return math.nan, info
+        names = rms_metrics(self.problem.base)
         if steady.periodic:
-            rms = {k: steady.metrics[k] for k in RMS_METRICS}
+            rms = {k: steady.metrics[k] for k in names}
         else:
-            rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in RMS_METRICS}
+            rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in names}
         return float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x))), info
 
     def regime_at(self, x) -> str:
@@ -288,7 +296,7 @@ class SteadyEvaluator:
         if steady.periodic:
             value, grad = self._program(steady)(jnp.asarray(x), steady.section_state, steady.monodromy)
             return float(value), np.asarray(grad), info
-        rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in RMS_METRICS}
+        rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in rms_metrics(self.problem.base)}
         value = float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x)))
         if self.objective.trend is None:
             return value, np.zeros(x.shape), info
@@ -296,6 +304,17 @@ class SteadyEvaluator:
             trend = self.problem.with_objective(self.objective.trend)
             self._trend = jax.jit(trend.value_and_grad)
         return value, np.asarray(self._trend(jnp.asarray(x))[1]), info
+
+
+def not_periodic_reason(problem, x) -> str:
+    """Why an optimiser stops at SI design ``x`` of ``problem`` when it is not periodic and
+    the steady-state gradient there is exactly zero (no trend estimate), and what to do."""
+    design = ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, np.asarray(x)))
+    return (
+        f"not periodic at {design}: the steady-state gradient there is exactly zero (no trend estimate), which "
+        "says nothing about optimality; start from a periodic design (classify starts with "
+        "SteadyEvaluator.regime_at) or give Steady a trend objective (Steady(trend=Ensemble()))"
+    )
 
 
 @dataclasses.dataclass(frozen=True)

@@ -25,9 +25,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
-from jaxcrank import laws, metrics, model
 from jaxcrank.numerics.solve import Simulation, simulate
-from jaxcrank.physics.params import Mechanism, ParameterError
+from jaxcrank.physics import model, signals
+from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
+from jaxcrank.physics.linkage import ConstantSpeed, Revolute
+from jaxcrank.physics.params import ParameterError
+from jaxcrank.physics.safemath import safe_norm
 
 
 class Grid(NamedTuple):
@@ -50,17 +53,24 @@ def sample_grid(
     mech: Mechanism, t_start: float, t_end: float, samples_per_degree: float, window: float | None = None
 ) -> Grid:
     """The [`Grid`][optim.windows.Grid] of the window ``(t_start, t_end]`` (s) with ``samples_per_degree``
-    samples per degree of crank angle; ``window`` (s) is the ensemble windows' length,
+    samples per degree of the driven body's angle; ``window`` (s) is the ensemble windows' length,
     rounded to whole sample steps and shrunk to divide the evaluation window.
 
     Raises:
-        ParameterError: ``mech.crank_speed`` is not concrete (a traced design variable).
+        ParameterError: the driver is not a [`jaxcrank.ConstantSpeed`][jaxcrank.physics.linkage.ConstantSpeed]
+            (equal times are equal driver angles only at constant speed), or ``mech.driver.speed``
+            is not concrete (a traced design variable).
     """
+    if not isinstance(mech.driver, ConstantSpeed):
+        raise ParameterError(
+            f"the windowed objectives sample at equal driver angles and need a constant-speed driver "
+            f"(jaxcrank.ConstantSpeed), not {type(mech.driver).__name__}; use the steady-state objective"
+        )
     try:
-        omega = float(mech.crank_speed)
+        omega = float(mech.driver.speed)
     except (TypeError, jax.errors.ConcretizationTypeError):
         raise ParameterError(
-            "the objective's sample grid needs a concrete crank_speed: build the "
+            "the objective's sample grid needs a concrete driver.speed: build the "
             "mechanism inside the traced function from a fixed base design"
         ) from None
     dt = math.radians(1.0 / samples_per_degree) / omega
@@ -77,13 +87,15 @@ def sample_grid(
 
 
 def rms_signal_values(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> dict:
-    """The per-sample signals behind `jaxcrank.analysis.metrics.RMS_METRICS` at
-    sample times ``ts`` (s) with scaled states ``ys``: RMS metric name -> (n,) signal in
-    the metric's unit (deg, m, N m, N)."""
+    """The per-sample signals behind the mechanism's RMS metrics
+    ([`jaxcrank.physics.signals.rms_metrics`][]) at sample times ``ts`` (s) with scaled states
+    ``ys``: RMS metric name -> (n,) signal in the metric's unit (deg, m, N m, N)."""
+    definitions = signals.metric_definitions(mech)
+    names = signals.rms_metrics(mech)
 
     def one(t, y):
-        sig = metrics.signals(model.evaluate(mech, t, y))
-        return {name: sig[metrics.METRICS[name][1]] for name in metrics.RMS_METRICS}
+        sig = signals.signals(mech, model.evaluate(mech, t, y))
+        return {name: sig[definitions[name].signal] for name in names}
 
     return jax.vmap(one)(jnp.asarray(ts), jnp.asarray(ys))
 
@@ -100,10 +112,10 @@ class Starts(NamedTuple):
     """Pin-in-bearing states at the start of the ensemble windows (no gradient), from
     [`window_starts`][optim.windows.window_starts] .
 
-    Attributes: t (K,) s; eccentricity (K, 2, 2) m and eccentricity_rate (K, 2, 2)
-    m/s for joints (B, C); rest (K, 4) the other state entries in SI units
-    (approach-speed memories at B and C, m/s; driver and dissipated work, J); clearance
-    (2,) m, of the design they were taken from.
+    Attributes: t (K,) s; eccentricity (K, J, 2) m and eccentricity_rate (K, J, 2)
+    m/s of the J clearance joints (the tree's cut joints, sorted); rest (K, aux) the other
+    state entries in SI units (the joint laws' states, e.g. approach-speed memories in m/s;
+    driver and dissipated work, J); clearance (J,) m, of the design they were taken from.
     """
 
     t: jax.Array
@@ -144,21 +156,28 @@ def window_starts(sim: Simulation) -> Starts:
     stored samples are the windows' starts (no gradient)."""
     mech = jax.lax.stop_gradient(sim.mechanism)
     t0s, y0s = sim.ts, sim.ys
-    d, d_rate = jax.vmap(model.eccentricities, in_axes=(None, 0, 0))(mech, t0s, y0s)
-    clearance = jnp.stack([mech.joint_B.clearance, mech.joint_C.clearance])
+    d, d_rate = jax.vmap(model.joint_eccentricities, in_axes=(None, 0, 0))(mech, t0s, y0s)
     rest = model.auxiliary(mech, y0s)  # SI: the scales change with the clearances
-    return jax.lax.stop_gradient(Starts(t0s, d, d_rate, rest, clearance))
+    return jax.lax.stop_gradient(Starts(t0s, d, d_rate, rest, clearances(mech)))
+
+
+def clearances(mech: Mechanism) -> Float[Array, " joints"]:
+    """Radial clearance of each clearance joint (the tree's cut joints, sorted), m."""
+    lk, tree = model.structure(mech)
+    return jnp.stack([jnp.asarray(lk.joints[j].clearance, dtype=float) for j in tree.cut])
 
 
 def start_state(mech: Mechanism, starts: Starts, i: Int[ArrayLike, ""]) -> Float[Array, " state"]:
     """Scaled state of ``mech`` at window ``i``: the pins where ``starts`` had them
     in their bearings, moving the same way, with the same gap or penetration (a
-    clearance change moves the pin radially by the change)."""
+    clearance change moves a revolute joint's pin radially by the change; a prismatic
+    joint's eccentricity is kept)."""
+    lk, tree = model.structure(mech)
     d = starts.eccentricity[i]
-    norm = laws.safe_norm(d, axis=-1)[:, None]
+    norm = safe_norm(d, axis=-1)[:, None]
     direction = jnp.where(norm > 0.0, d / jnp.where(norm > 0.0, norm, 1.0), 0.0)
-    clearance = jnp.stack([mech.joint_B.clearance, mech.joint_C.clearance])
-    d = d + (clearance - starts.clearance)[:, None] * direction
+    radial = jnp.asarray([isinstance(lk.connections[j], Revolute) for j in tree.cut], dtype=float)
+    d = d + (radial * (clearances(mech) - starts.clearance))[:, None] * direction
     return model.state_from_eccentricities(mech, starts.t[i], d, starts.eccentricity_rate[i], starts.rest[i])
 
 
@@ -177,11 +196,12 @@ def solve_window(
     ``adjoint`` (diffrax): its sample times (n_window,) s, scaled states (zero where the
     solve failed, so a failed window is reported by the caller, not propagated as NaN)
     and whether it finished within ``max_steps``. ``options``: ``rtol``, ``atol``."""
-    # local time from the window's start (the crank angle carries the offset): diffrax then
+    # local time from the window's start (the driver's angle carries the offset): diffrax then
     # sees concrete times and compiles no run-time checks of them (host callbacks, which
     # JAX's persistent compilation cache does not store)
     y0 = start_state(mech, starts, i)
-    mech = eqx.tree_at(lambda m: m.initial_crank_angle, mech, mech.initial_crank_angle + mech.crank_speed * starts.t[i])
+    driver = mech.driver
+    mech = eqx.tree_at(lambda m: m.driver.initial_angle, mech, driver.initial_angle + driver.speed * starts.t[i])
     ts = grid.dt * np.arange(grid.n_window + 1)
     sim = simulate(mech, ts=ts, y0=y0, solver=solver, max_steps=max_steps, throw=False, adjoint=adjoint, **options)
     ok = sim.ok & jnp.all(jnp.isfinite(sim.ys))

@@ -15,10 +15,12 @@ from jaxcrank import paper
 from optim import search, sensitivity
 from optim import windows as W
 from optim.objective import EQ19, Ensemble, Pathwise, eq19, value_and_grad
-from optim.problem import ParameterProblem, paper_problem, tolerance_problem
+from optim.presets import paper_problem, tolerance_problem
+from optim.problem import ParameterProblem
 from tests.objectives import EXACT, SHORT, central_difference
 
 
+@pytest.mark.slow  # compiles a reverse-mode solve: 73-95 s (38 s with the slider-crank-only model)
 @pytest.mark.parametrize("i", [0, 1], ids=["L1", "L2"])
 def test_pathwise_gradient_matches_central_differences_on_short_window(i):
     prob = paper_problem(EXACT)
@@ -30,6 +32,7 @@ def test_pathwise_gradient_matches_central_differences_on_short_window(i):
     assert abs(g[i] - fd) <= 1e-4 * abs(fd)
 
 
+@pytest.mark.slow  # two 30 ms solves and the windows, compiled: 131 s
 def test_ensemble_value_is_eq19_and_windows_reassemble_it():
     """Value checks within one compiled solve (eager calls share diffrax's compiled
     solve): another compilation of the same 30 ms solve differs by ~0.2 % (impact
@@ -44,6 +47,7 @@ def test_ensemble_value_is_eq19_and_windows_reassemble_it():
     assert float(SHORT.pooled(mech, starts)[EQ19]) == pytest.approx(exact, rel=1e-3)
 
 
+@pytest.mark.slow  # a 30 ms reference solve and two carried-over start states, compiled: 43-72 s (16 s before)
 def test_start_state_round_trip_and_carry_over():
     prob = paper_problem(SHORT)
     mech = prob.mechanism(jnp.array([0.12, 0.40]))
@@ -51,13 +55,13 @@ def test_start_state_round_trip_and_carry_over():
     y = W.start_state(mech, starts, 2)
     from jaxcrank import model
 
-    d, dd = model.eccentricities(mech, starts.t[2], y)
+    d, dd = model.joint_eccentricities(mech, starts.t[2], y)
     np.testing.assert_allclose(d, starts.eccentricity[2], rtol=0, atol=1e-15)
     np.testing.assert_allclose(dd, starts.eccentricity_rate[2], rtol=0, atol=1e-12)
     # another clearance: the pins keep their gap or penetration
     other = prob.mechanism(jnp.array([0.12, 0.40]))
     other = dataclasses.replace(tolerance_problem(SHORT), base=other).mechanism(jnp.array([3e-4, 4e-4]))
-    d2, _ = model.eccentricities(other, starts.t[2], W.start_state(other, starts, 2))
+    d2, _ = model.joint_eccentricities(other, starts.t[2], W.start_state(other, starts, 2))
     gap_before = np.linalg.norm(starts.eccentricity[2], axis=-1) - np.asarray(starts.clearance)
     gap_after = np.linalg.norm(d2, axis=-1) - np.array([3e-4, 4e-4])
     np.testing.assert_allclose(gap_after, gap_before, atol=1e-15)
@@ -88,7 +92,10 @@ def _estimator_matches_central_differences(obj):
 
 @pytest.mark.parametrize(
     "adjoint",
-    [diffrax.ForwardMode(), pytest.param(diffrax.RecursiveCheckpointAdjoint(), marks=pytest.mark.slow)],
+    [
+        pytest.param(diffrax.ForwardMode(), marks=pytest.mark.slow),  # forward-mode windows, compiled: 181 s
+        pytest.param(diffrax.RecursiveCheckpointAdjoint(), marks=pytest.mark.slow),
+    ],
     ids=["forward", "reverse"],
 )
 def test_ensemble_gradient_is_the_derivative_of_the_windows_with_starts_fixed(adjoint):
@@ -182,16 +189,20 @@ def test_ensemble_gradient_follows_the_least_squares_slope(design):
 def test_permuting_the_metric_definitions_changes_no_objective_value(monkeypatch):
     """The objectives and the design terms read the metrics by name: with the RMS
     metrics' order reversed, the design problem's value is the same, bit for bit."""
-    from jaxcrank.analysis import metrics
+    from jaxcrank.physics import signals
     from optim import objective as O
     from optim.design import design_problem
 
     prob = design_problem(Pathwise(t_start=0.0, t_end=1e-3, rtol=1e-10, atol=1e-10, max_steps=100_000))
     x = jnp.asarray(prob.from_unit(prob.start_unit()))
     before = float(jax.jit(prob.objective_value)(x))
-    reordered = tuple(reversed(metrics.RMS_METRICS))
-    monkeypatch.setattr(metrics, "RMS_METRICS", reordered)
-    monkeypatch.setattr(O, "RMS_METRICS", reordered)
+    original = signals.rms_metrics
+
+    def reordered(mech):
+        return tuple(reversed(original(mech)))
+
+    monkeypatch.setattr(signals, "rms_metrics", reordered)
+    monkeypatch.setattr(O, "rms_metrics", reordered)
     after = float(jax.jit(lambda x: prob.objective_value(x))(x))
     assert after == before
 
@@ -226,6 +237,36 @@ def test_regime_guard_halves_a_step_that_leaves_the_periodic_regime_then_holds()
 
 
 CHEAP = Pathwise(t_start=0.0, t_end=2e-3)
+
+
+def test_a_warm_start_that_meets_no_attracting_orbit_is_classified_again_from_rest(monkeypatch):
+    """The steady-state evaluator warm-starts from the last periodic orbit; when that solve
+    ends not periodic after a single period of settle (its shooting met an unstable orbit,
+    as on the four-bar preset after Adam's first step), the design is solved again from rest
+    and its regime is the motion's from rest. A not-periodic result after a full settle is kept."""
+    from types import SimpleNamespace
+
+    from optim.steady import Steady, SteadyEvaluator
+
+    calls = []
+
+    def solve(self, mech, warm_start=None):
+        calls.append("warm" if warm_start is not None else "rest")
+        from_rest = warm_start is None
+        periodic = from_rest or float(mech.crank_length) < 0.125
+        settle = 20 if from_rest else 1
+        return SimpleNamespace(periodic=periodic, revolutions={"settle": settle}, ok=True)
+
+    monkeypatch.setattr(Steady, "solve", solve)
+    ev = SteadyEvaluator(paper_problem(Steady()))
+    assert ev.steady_at(np.array([0.12, 0.40])).periodic and calls == ["rest"]
+    assert ev.steady_at(np.array([0.13, 0.40])).periodic and calls == ["rest", "warm", "rest"]
+    assert ev.steady_at(np.array([0.121, 0.40])).periodic and calls[3:] == ["warm"]
+    # a warm start that settled fully and is still not periodic is believed
+    monkeypatch.setattr(
+        Steady, "solve", lambda self, mech, warm_start=None: SimpleNamespace(periodic=False, revolutions={"settle": 21})
+    )
+    assert not ev.steady_at(np.array([0.122, 0.40])).periodic
 
 
 @pytest.mark.slow  # compiles the steady-state solve and the gradient program (about 3 min on 2 cores)

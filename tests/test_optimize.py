@@ -13,7 +13,7 @@ from optim import search
 from optim.objective import Pathwise
 from optim.optimize import Settings, multistart, optimize, programs, start_points
 from optim.optimizers import adam, from_settings
-from optim.problem import paper_problem
+from optim.presets import paper_problem
 from tests.objectives import SHORT
 
 
@@ -25,6 +25,7 @@ def short_run():
     return prob, optimize(prob, Settings(optimizer=adam(0.2), max_iterations=12), progress=False)
 
 
+@pytest.mark.slow  # the short_run fixture (94 s) and a reverse-mode pathwise gradient (100 s)
 def test_ensemble_gradient_is_finite_and_pathwise_is_not(short_run):
     prob, res = short_run
     g = np.array([res["history"][0][f"grad_{n}_deg_per_SI"] for n in prob.names])
@@ -38,7 +39,13 @@ def test_ensemble_gradient_is_finite_and_pathwise_is_not(short_run):
 CHEAP = Pathwise(t_start=0.0, t_end=2e-3)
 
 
-@pytest.mark.parametrize("method", ["adam", pytest.param("lbfgs", marks=[pytest.mark.slow, pytest.mark.long])])
+@pytest.mark.parametrize(
+    "method",
+    [
+        pytest.param("adam", marks=pytest.mark.slow),  # two optimisations of a compiled pathwise solve: 82 s
+        pytest.param("lbfgs", marks=[pytest.mark.slow, pytest.mark.long]),
+    ],
+)
 def test_resume_reproduces_the_uninterrupted_history(tmp_path, method):
     prob = paper_problem(CHEAP)
     settings = Settings(optimizer=from_settings(method), max_iterations=4, gtol=0.0, xtol=0.0)
@@ -94,6 +101,7 @@ def test_multistart_keeps_the_best_run_and_a_killed_run_resumes_without_redoing_
         multistart(prob, other, out=cut, resume=True, progress=False)
 
 
+@pytest.mark.slow  # the short_run fixture and a 5 x 5 vmap grid: 124 s
 def test_optimiser_reaches_the_trend_optimum_of_the_grid_on_short_settings(short_run):
     """On this 10 ms window the objective jitters by several per cent between
     neighbouring designs (impact chaos; measured: along L1 = 110 mm the grid's values
@@ -169,7 +177,14 @@ def test_optimize_cli_with_several_starts_writes_each_start_and_the_best(tmp_pat
     assert main(["optimize", "--config", str(cfg), "--out", str(out), "--starts", "3", "--quiet"]) == 2
 
 
-@pytest.mark.parametrize("objective", [pytest.param("pathwise", marks=pytest.mark.slow), "ensemble_forward"])
+@pytest.mark.parametrize(
+    "objective",
+    [
+        pytest.param("pathwise", marks=pytest.mark.slow),
+        # L-BFGS's update with the forward-mode ensemble program inside its line search: 385 s
+        pytest.param("ensemble_forward", marks=[pytest.mark.slow, pytest.mark.long]),
+    ],
+)
 def test_lbfgs_runs_with_pathwise_and_forward_mode_objectives(objective):
     """L-BFGS's zoom line search differentiates the extended objective with
     jax.value_and_grad; the gradient comes from the optimiser's own program, so a

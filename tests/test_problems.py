@@ -10,7 +10,8 @@ from jaxcrank import paper
 from jaxcrank.physics.params import ParameterError
 from optim import search
 from optim.objective import Pathwise, eq19
-from optim.problem import ParameterProblem, paper_problem, robust_problem
+from optim.presets import paper_problem, robust_problem
+from optim.problem import ParameterProblem
 from tests.objectives import EXACT, central_difference
 
 
@@ -50,9 +51,9 @@ def test_projection_with_an_active_linear_constraint():
                 lower=(0.39,),
                 upper=(0.41,),
                 samples=2,
-                scatter=(("crank_speed", 1.0, "uniform"),),
+                scatter=(("driver.speed", 1.0, "uniform"),),
             ),
-            "crank_speed",
+            "driver.speed",
         ),
         (
             dict(
@@ -150,10 +151,18 @@ def _implemented(cls):
 @pytest.mark.parametrize(
     "base, finals",
     [
-        ("optim.problem.AbstractProblem", ("optim.problem.ParameterProblem", "optim.design.DesignProblem")),
+        (
+            "optim.problem.AbstractProblem",
+            ("optim.problem.ParameterProblem", "optim.design.DesignProblem", "optim.four_bar.FourBarProblem"),
+        ),
         ("optim.objective.AbstractObjective", ("optim.objective.Pathwise", "optim.objective.Ensemble")),
         ("optim.objective.AbstractObjective", ("optim.steady.Steady",)),
-        ("optim.optimizers.AbstractOptimizer", ("optim.optimizers.Projected", "optim.optimizers.LBFGS")),
+        (
+            "optim.optimizers.AbstractOptimizer",
+            ("optim.optimizers.Projected", "optim.optimizers.LBFGS", "optim.optimizers.ProjectedLBFGS"),
+        ),
+        ("optim.optimizers.AbstractUpdateOptimizer", ("optim.optimizers.Projected", "optim.optimizers.LBFGS")),
+        ("optim.optimizers.AbstractLineSearchOptimizer", ("optim.optimizers.ProjectedLBFGS",)),
     ],
 )
 def test_abstract_or_final_no_implemented_method_is_overridden(base, finals):
