@@ -2,16 +2,18 @@
 (bench/fuzz_report.py): hypothesis strategies over the ranges below and the check of
 one design.
 
-Ranges (SI; log-uniform where marked):
+Ranges (SI; log-uniform where marked), of the offset slider-crank
+([`jaxcrank.SliderCrank`][]):
 
 - crank_length 0.05..0.3 m; offset -0.1..0.1 m; rod_length (crank_length + |offset|)
   times 1.02..4 (from near the assembly limit to a long rod);
 - crank, rod and slider masses 0.1..10 kg (log); rod_inertia 1e-5..0.1 kg m^2 (log);
 - crank speed 10..3000 rpm (log); initial crank angle 0..2 pi rad;
 - hole radii 4..20 mm; radial clearances at B and C 1 um..1 mm (log);
-- restitution 0.3..1; friction off (coefficient 0) or on (0.01..0.3);
-- structure (one compiled solve each): the six contact laws times four joint layouts
-  (clearance at B and C, ideal B, ideal C, both ideal).
+- restitution 0.3..1; friction off (coefficient 0) or on (0.01..0.3), the same at B and C;
+- structure (one compiled solve each): the six contact laws times three joint layouts
+  (clearance at B and C, B ideal, C ideal; with both ideal the loop would have no
+  clearance joint, which is no mechanism).
 
 Each design is simulated for ``T1`` from the pins-centred start with a step budget of
 ``MAX_STEPS``. Numeric parameters are passed as arrays (traced), so one compiled solve
@@ -36,9 +38,11 @@ MAX_STEPS = 20_000  #: step budget; a design that needs more reports max_steps
 #: work-energy residual tolerance, as a fraction of the run's energy scale (largest
 #: kinetic energy + |driver work| + dissipated work): the 0.5 % the paper-run test uses
 ENERGY_RTOL = 5e-3
-LAYOUTS = {"BC": (False, False), "C": (True, False), "B": (False, True), "none": (True, True)}
-#: (contact law, layout) pairs: layout names the joints that have clearance
+#: layout name -> (B ideal, C ideal); the name lists the joints with clearance
+LAYOUTS = {"BC": (False, False), "C": (True, False), "B": (False, True)}
+#: (contact law, layout) pairs
 STRUCTURES = [(law, layout) for law in jc.CONTACT_LAWS for layout in LAYOUTS]
+PINS = ("B", "C")
 
 
 def _log(lo, hi):
@@ -47,17 +51,23 @@ def _log(lo, hi):
 
 @st.composite
 def designs(draw, structures=STRUCTURES):
-    """A valid :class:`jaxcrank.Mechanism` (concrete floats) and its structure."""
+    """A valid [`jaxcrank.SliderCrank`][] (concrete floats) of one of ``structures``."""
     law, layout = draw(st.sampled_from(structures))
     l1 = draw(st.floats(0.05, 0.3))
     e = draw(st.floats(-0.1, 0.1))
     l2 = (l1 + abs(e)) * draw(st.floats(1.02, 4.0))
-    joints = {}
-    for j, ideal in zip("BC", LAYOUTS[layout]):
+    contact = jc.Contact(law=jc.CONTACT_LAWS[law](), restitution=draw(st.floats(0.3, 1.0)))
+    friction = jc.Friction(coefficient=draw(st.one_of(st.just(0.0), st.floats(0.01, 0.3))))
+    joints = {"A": jc.Ideal(), "guide": jc.Ideal()}
+    for j, ideal in zip(PINS, LAYOUTS[layout]):
         hole = draw(st.floats(4e-3, 20e-3))
-        joints[j] = jc.Joint(hole_radius=hole, pin_radius=hole - draw(_log(1e-6, 1e-3)), ideal=ideal)
-    friction = draw(st.one_of(st.just(0.0), st.floats(0.01, 0.3)))
-    return jc.Mechanism(
+        clearance = draw(_log(1e-6, 1e-3))
+        joints[j] = (
+            jc.Ideal()
+            if ideal
+            else jc.Clearance(hole_radius=hole, pin_radius=hole - clearance, contact=contact, friction=friction)
+        )
+    return jc.SliderCrank(
         crank_length=l1,
         rod_length=l2,
         offset=e,
@@ -65,12 +75,12 @@ def designs(draw, structures=STRUCTURES):
         rod_mass=draw(_log(0.1, 10.0)),
         slider_mass=draw(_log(0.1, 10.0)),
         rod_inertia=draw(_log(1e-5, 0.1)),
-        crank_speed=2.0 * math.pi * draw(_log(10.0, 3000.0)) / 60.0,
-        initial_crank_angle=draw(st.floats(0.0, 2.0 * math.pi)),
-        joint_B=joints["B"],
-        joint_C=joints["C"],
-        contact=jc.Contact(law=jc.CONTACT_LAWS[law](), restitution=draw(st.floats(0.3, 1.0))),
-        friction=jc.Friction(coefficient=friction),
+        driver=jc.ConstantSpeed(
+            body="crank",
+            speed=2.0 * math.pi * draw(_log(10.0, 3000.0)) / 60.0,
+            initial_angle=draw(st.floats(0.0, 2.0 * math.pi)),
+        ),
+        joints=joints,
     )
 
 
@@ -80,13 +90,17 @@ def traced(mech):
     return jax.tree.map(lambda x: jnp.asarray(x, dtype=float), mech)
 
 
+def _clearance_pins(mech) -> list[str]:
+    return [j for j in PINS if not mech.joints[j].ideal]
+
+
 def outcome(mech) -> dict:
     """Simulate ``mech`` and check it. Returns a dict: ``status`` (``ok`` or the failure
-    named by :func:`jaxcrank.simulate`'s :class:`~jaxcrank.SimulationError`: ``max_steps``,
+    named by [`jaxcrank.simulate`][]'s [`SimulationError`][jaxcrank.SimulationError]: ``max_steps``,
     ``solver_failed``, ``non_finite``), ``message``, ``steps``; for ``ok``: whether every
     output column is finite, the energy residual / energy scale, and the largest
-    deviation / geometric bound ratios (``outputs.deviation_bounds``) of slider x, rod x
-    and the pin eccentricities (<= 1 inside the bound)."""
+    deviation / geometric bound ratios ([`SliderCrank.deviation_bounds`][jaxcrank.SliderCrank.deviation_bounds])
+    of slider x, rod x and the pin eccentricities (<= 1 inside the bound)."""
     ts = jnp.linspace(0.0, T1, N_SAMPLES)
     try:
         sim = jc.simulate(traced(mech), ts=ts, max_steps=MAX_STEPS)
@@ -99,7 +113,7 @@ def outcome(mech) -> dict:
     bal = outputs.energy_balance(cols)
     scale = float(np.max(cols["kinetic_energy"])) + abs(bal["driver_work_J"]) + abs(bal["dissipated_work_J"])
     pen = float(max(np.max(cols["penetration_B"]), np.max(cols["penetration_C"]), 0.0))
-    bounds = outputs.deviation_bounds(mech, pen)
+    bounds = mech.deviation_bounds(pen)
 
     def ratio(dev, bound):  # both joints ideal: the bound is 0 and the motion the closed form, exactly
         return dev / bound if bound > 0 else (0.0 if dev == 0.0 else math.inf)
@@ -108,11 +122,10 @@ def outcome(mech) -> dict:
         "slider_x": ratio(float(np.max(np.abs(cols["slider_x"] - cols["ideal_slider_x"]))), bounds["slider_x_m"]),
         "rod_x": ratio(float(np.max(np.abs(cols["rod_x"] - cols["ideal_rod_x"]))), bounds["rod_x_m"]),
     }
-    for j in "BC":
-        joint = getattr(mech, f"joint_{j}")
-        if not joint.ideal:
-            ecc = np.hypot(cols[f"ecc_{j}_x"], cols[f"ecc_{j}_y"])
-            ratios[f"ecc_{j}"] = float(np.max(ecc / (float(joint.clearance) + np.max(cols[f"penetration_{j}"]))))
+    for j in _clearance_pins(mech):
+        ecc = np.hypot(cols[f"ecc_{j}_x"], cols[f"ecc_{j}_y"])
+        clearance = float(mech.joints[j].clearance)
+        ratios[f"ecc_{j}"] = float(np.max(ecc / (clearance + np.max(cols[f"penetration_{j}"]))))
     return {
         "status": "ok",
         "message": "",
@@ -137,21 +150,26 @@ def assert_outcome(res: dict) -> None:
         assert r <= 1.0 + 1e-12, (k, res)
 
 
+def structure(mech) -> tuple[str, str]:
+    """(contact law name, layout: the joints with clearance)."""
+    pins = _clearance_pins(mech)
+    return mech.joints[pins[0]].contact.law.name, "".join(pins)
+
+
 def describe(mech) -> dict:
-    """The drawn numbers of a design, for the report (SI; speed in rpm)."""
+    """The drawn numbers of a design, for the report (SI; speed in rpm; an ideal joint's
+    clearance None)."""
+    law, layout = structure(mech)
+    some = mech.joints[_clearance_pins(mech)[0]]
     return {
-        "law": mech.contact.law.name,
-        "clearance joints": "".join(j for j in "BC" if not getattr(mech, f"joint_{j}").ideal) or "none",
-        "rpm": float(mech.crank_speed) * 60.0 / (2.0 * math.pi),
-        "clearance_B_m": float(mech.joint_B.clearance),
-        "clearance_C_m": float(mech.joint_C.clearance),
-        "friction": float(mech.friction.coefficient),
+        "law": law,
+        "clearance joints": layout,
+        "rpm": float(mech.driver.speed) * 60.0 / (2.0 * math.pi),
+        "clearance_B_m": None if mech.joints["B"].ideal else float(mech.joints["B"].clearance),
+        "clearance_C_m": None if mech.joints["C"].ideal else float(mech.joints["C"].clearance),
+        "friction": float(some.friction.coefficient),
         "rod_over_min": float(mech.rod_length) / (float(mech.crank_length) + abs(float(mech.offset))),
     }
-
-
-def structure(mech) -> tuple[str, str]:
-    return mech.contact.law.name, "".join(j for j in "BC" if not getattr(mech, f"joint_{j}").ideal) or "none"
 
 
 __all__ = ["designs", "outcome", "assert_outcome", "describe", "structure", "traced", "STRUCTURES"]

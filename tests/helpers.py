@@ -3,14 +3,37 @@ import equinox as eqx
 import jaxcrank as jc
 
 
+def _clearance_joints(mech):
+    """Names of the joints whose law has contact settings (dry clearance joints)."""
+    return [j for j in sorted(mech.joints) if hasattr(mech.joints[j], "contact")]
+
+
 def frictionless(mech):
-    return eqx.tree_at(lambda m: m.friction.coefficient, mech, 0.0)
+    """``mech`` with friction coefficient 0 in every joint that has friction."""
+    return jc.set_parameter(mech, "friction.coefficient", 0.0)
 
 
 def with_law(mech, law, restitution=None):
-    """``mech`` with the contact law named ``law`` (a key of ``jc.laws.CONTACT_LAWS``)."""
-    ce = mech.contact.restitution if restitution is None else restitution
-    return eqx.tree_at(lambda m: m.contact, mech, jc.Contact(law=jc.laws.CONTACT_LAWS[law](), restitution=ce))
+    """``mech`` with the contact law named ``law`` (a key of ``jc.laws.CONTACT_LAWS``) in
+    every dry clearance joint, at restitution ``restitution`` (default: each joint's own)."""
+    for j in _clearance_joints(mech):
+        old = mech.joints[j].contact
+        ce = old.restitution if restitution is None else restitution
+        contact = jc.Contact(law=jc.laws.CONTACT_LAWS[law](), restitution=ce)
+        mech = eqx.tree_at(lambda m, j=j: m.joints[j].contact, mech, contact)
+    return mech
+
+
+def with_ideal(mech, *names):
+    """``mech`` with the joints ``names`` ideal."""
+    for j in names:
+        mech = eqx.tree_at(lambda m, j=j: m.joints[j], mech, jc.Ideal())
+    return mech
+
+
+def body_index(mech, body):
+    """Position of ``body`` in the per-body arrays of a frame."""
+    return jc.ideal.body_index(mech, body)
 
 
 def tree_allclose(x, y, *, rtol=1e-5, atol=1e-8, equal_nan=False):

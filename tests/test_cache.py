@@ -30,7 +30,8 @@ import numpy as np
 import pytest
 from optim.objective import Ensemble
 from optim.optimize import programs
-from optim.problem import ParameterProblem, paper_problem
+from optim.problem import ParameterProblem
+from optim.presets import paper_problem
 traced = []
 original = ParameterProblem.objective_value
 def counting(self, *a, **k):

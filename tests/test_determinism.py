@@ -29,11 +29,11 @@ for run in range(2):
     # 10 ms of the paper run: through the start-up impacts, where any last-bit difference grows
     sim = jc.simulate(jc.paper(), 0.01, n_samples=1001)
     cols = outputs.trajectory(sim)
-    res[f"simulate run {run}"] = [digest(sim.ys), digest(np.stack([cols[k] for k in outputs.COLUMNS])),
+    res[f"simulate run {run}"] = [digest(sim.ys), digest(np.stack([cols[k] for k in outputs.columns(sim.mechanism)])),
                                   int(sim.num_steps)]
     tab = sweep.run(jc.paper(), ["clearance_C", "contact.restitution"],
                     [[2.5e-4, 0.9], [3e-4, 0.7], [4e-4, 1.0]], settings, chunk=2, progress=False, engine="xla")
-    res[f"sweep run {run}"] = [digest(np.stack([tab[k] for k in sweep.METRICS])), list(tab["status"]),
+    res[f"sweep run {run}"] = [digest(np.stack([tab[k] for k in sweep.metric_names(jc.paper())])), list(tab["status"]),
                                digest(tab["steps"])]
 print(json.dumps(res))
 """

@@ -44,7 +44,7 @@ import sys
 from pathlib import Path
 from optim.objective import Pathwise
 from optim.optimize import Settings, optimize
-from optim.problem import paper_problem
+from optim.presets import paper_problem
 out = Path(sys.argv[1])
 prob = paper_problem(Pathwise(t_start=0.0, t_end=2e-3))
 optimize(prob, Settings(max_iterations=6, gtol=0.0, xtol=0.0), out=out,
@@ -210,7 +210,7 @@ def _checkpoint(out):
     from optim.checkpoint import history_columns
     from optim.checkpoint import save as write
     from optim.optimize import Settings
-    from optim.problem import paper_problem
+    from optim.presets import paper_problem
 
     prob = paper_problem()
     u = np.array([0.5, 0.5])

@@ -18,13 +18,16 @@ WINDOW = 1.2e-3
 PARAMS = ["crank_length", "rod_length", "clearance_B", "clearance_C"]
 
 
+ROD, SLIDER = ideal.body_index(jc.paper(), "rod"), ideal.body_index(jc.paper(), "slider")
+
+
 def _mechanism(p):
     base = jc.paper()
     l1, l2, cb, cc = p
     return eqx.tree_at(
-        lambda m: (m.crank_length, m.rod_length, m.joint_B.pin_radius, m.joint_C.pin_radius),
+        lambda m: (m.crank_length, m.rod_length, m.joints["B"].pin_radius, m.joints["C"].pin_radius),
         base,
-        (l1, l2, base.joint_B.hole_radius - cb, base.joint_C.hole_radius - cc),
+        (l1, l2, base.joints["B"].hole_radius - cb, base.joints["C"].hole_radius - cc),
     )
 
 
@@ -33,8 +36,8 @@ def rms_slider_deviation_mm(p, t1=WINDOW, adjoint=None):
     sim = jc.simulate(mech, ts=jnp.linspace(0.0, t1, 51), rtol=1e-10, atol=1e-10, max_steps=100_000, adjoint=adjoint)
     q = jax.vmap(lambda t, y: model.evaluate(mech, t, y).q)(sim.ts, sim.ys)
     qi = jax.vmap(lambda t: ideal.positions(mech, t))(sim.ts)
-    rod = q[:, :2] - qi[:, :2]
-    return 1e3 * jnp.sqrt(jnp.mean((q[:, 3] - qi[:, 3]) ** 2) + jnp.mean(rod**2))
+    rod = q[:, ROD, :2] - qi[:, ROD, :2]
+    return 1e3 * jnp.sqrt(jnp.mean((q[:, SLIDER, 0] - qi[:, SLIDER, 0]) ** 2) + jnp.mean(rod**2))
 
 
 P0 = jnp.array([0.150, 0.403, 5e-4, 5e-4])

@@ -37,7 +37,7 @@ def test_half_revolution_run_states_its_window(tmp_path, capsys):
     )
     printed = capsys.readouterr().out
     assert "after the first revolution" not in printed
-    assert "over the whole run, 0 to 0.01 s (shorter than one crank revolution, 0.02 s)" in printed
+    assert "over the whole run, 0 to 0.01 s (shorter than one revolution, 0.02 s)" in printed
     summary = json.loads((out / "summary.json").read_text())
     m = summary["metrics"]
     assert m["window_start_s"] == 0.0 and m["window_end_s"] == pytest.approx(0.01, rel=1e-12)
@@ -59,7 +59,7 @@ def test_a_metrics_window_without_samples_is_refused():
         outputs.sample_metrics(sim, 0.2)
 
 
-@pytest.mark.parametrize("override", ["crank_speed=1e5", "rod_length=1e9"])
+@pytest.mark.parametrize("override", ["driver.speed=1e5", "rod_length=1e9"])
 def test_failure_message_gives_requested_and_reached_time(tmp_path, capsys, override):
     rc = cli.main(
         [

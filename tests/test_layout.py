@@ -1,5 +1,6 @@
 """The package's layout: files of a readable size, imports that run one way (no import
-cycle between modules), and private APIs of other packages read in one shim only
+cycle between modules; jaxcrank's layers physics, numerics, analysis, runs each import
+only the ones before them), and private APIs of other packages read in one shim only
 (jaxcrank/_private.py). Static checks of the sources: nothing is imported or run."""
 
 import ast
@@ -52,6 +53,58 @@ def _module_imports(path: Path, modules: set[str]) -> set[str]:
     return out
 
 
+def _resolve(path: Path, node: ast.ImportFrom) -> str:
+    """The absolute module name an ``import from`` statement in ``path`` reads from."""
+    if not node.level:
+        return node.module or ""
+    name = _name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    base = package.split(".")
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _all_imports(path: Path) -> set[str]:
+    """Every name ``path`` imports, anywhere in the file (functions included: an import
+    on first use is still a dependency), as absolute dotted names (``from a import b``
+    gives ``a.b``)."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            target = _resolve(path, node)
+            out |= {f"{target}.{a.name}" for a in node.names}
+    return out
+
+
+#: jaxcrank's layers, each importing only from the ones before it (jaxcrank/__init__.py)
+LAYERS = ("physics", "numerics", "analysis", "runs")
+#: modules of the top package every layer may import
+SHARED = ("jaxcrank.errors", "jaxcrank._private")
+
+
+def _layer_violations(package="jaxcrank"):
+    """``file: imported name`` for every import of a later layer (or of the top package,
+    which imports them all) by a module of an earlier one."""
+    found = []
+    for f in _sources(package):
+        parts = _name(f).split(".")
+        if len(parts) < 2 or parts[1] not in LAYERS:
+            continue
+        own = LAYERS.index(parts[1])
+        for name in sorted(_all_imports(f)):
+            pieces = name.split(".")
+            if pieces[0] != package or any(name == s or name.startswith(s + ".") for s in SHARED):
+                continue
+            layer = pieces[1] if len(pieces) > 1 and pieces[1] in LAYERS else None
+            if layer is None and LAYERS[own] != LAYERS[-1]:
+                found.append(f"{f.relative_to(ROOT)}: {name} (the top package imports every layer)")
+            elif layer is not None and LAYERS.index(layer) > own:
+                found.append(f"{f.relative_to(ROOT)}: {name} ({parts[1]} may not import {layer})")
+    return found
+
+
 def _cycles(packages):
     files = _sources(*packages)
     modules = {_name(f) for f in files}
@@ -101,6 +154,31 @@ def test_the_cycle_finder_finds_a_cycle(tmp_path, monkeypatch):
     (pkg / "c.py").write_text("def f():\n    from . import a\n")  # on first use: no edge
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     assert _cycles(["cyc"]) == [["cyc.a", "cyc.b", "cyc.a"]]
+
+
+def test_the_layers_import_one_way():
+    """physics imports nothing of numerics, analysis or runs; numerics nothing of
+    analysis or runs; analysis nothing of runs; none of them the top package."""
+    assert _layer_violations() == []
+
+
+def test_the_layer_check_finds_an_import_against_the_order(tmp_path, monkeypatch):
+    pkg = tmp_path / "jaxcrank"
+    for layer in LAYERS:
+        (pkg / layer).mkdir(parents=True)
+        (pkg / layer / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text("")
+    (pkg / "errors.py").write_text("")
+    (pkg / "physics" / "a.py").write_text("from ..errors import E\ndef f():\n    from ..runs import cli\n")
+    (pkg / "numerics" / "b.py").write_text("from ..physics import a\nimport jaxcrank.analysis.metrics\n")
+    (pkg / "analysis" / "c.py").write_text("from .. import __version__\nfrom ..numerics.b import x\n")
+    (pkg / "runs" / "d.py").write_text("from .. import __version__\nfrom ..analysis import c\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    assert _layer_violations() == [
+        "jaxcrank/analysis/c.py: jaxcrank.__version__ (the top package imports every layer)",
+        "jaxcrank/numerics/b.py: jaxcrank.analysis.metrics (numerics may not import analysis)",
+        "jaxcrank/physics/a.py: jaxcrank.runs.cli (physics may not import runs)",
+    ]
 
 
 def test_private_apis_of_other_packages_only_in_the_shim():

@@ -23,14 +23,14 @@ def test_paper_preset_matches_table_1():
         t["rod_inertia_kg_m2"],
         t["slider_inertia_kg_m2"],
     )
-    for joint in (m.joint_B, m.joint_C):
+    for joint in (m.joints["B"], m.joints["C"]):
         assert (joint.pin_radius, joint.hole_radius) == (t["pin_radius_m"], t["hole_radius_m"])
-    assert m.crank_speed == pytest.approx(t["crank_speed_rpm"] * 2 * 3.141592653589793 / 60, rel=1e-15)
+    assert m.driver.speed == pytest.approx(t["crank_speed_rpm"] * 2 * 3.141592653589793 / 60, rel=1e-15)
 
 
 def test_optimisation_reference_used_by_the_optimiser_cli():
     from optim import cli
-    from optim.problem import paper_problem
+    from optim.presets import paper_problem
 
     opt = reference.load()["optimisation"]
     assert cli.PAPER_OPTIMUM_DEG == opt["optimum_deg"] == 0.097966
