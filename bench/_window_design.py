@@ -17,7 +17,7 @@ def build(name: str, objective: dict):
     jax.config.update("jax_enable_x64", True)
     from optim.design import design_problem
     from optim.objective import Ensemble
-    from optim.problem import paper_problem
+    from optim.presets import paper_problem
 
     obj = Ensemble(**objective)
     if name.startswith("paper"):

@@ -1,7 +1,7 @@
 """Audit of the approach-speed memory over a paper run (docs/numerics.md).
 
 At every contact onset the approach speed the damping uses (the memory, floored at
-``contact.min_approach_speed``) is compared with the true normal speed just before
+``memory.min_approach_speed``) is compared with the true normal speed just before
 onset (:mod:`jaxcrank.analysis.validation.memory_audit`). Default tolerances, 0.4 s; the paper preset and the
 issue's setting (Hunt-Crossley, Ambrosio's friction ramp). Then the cost: the solver's
 accepted and rejected steps of the 0.4 s run (tsit5, default tolerances) of each setting,
@@ -9,7 +9,7 @@ and over an ensemble of runs with the restitution 0.9 +- 5e-3 in steps of 1e-4 (
 the step count of one run is chaotic: a 1e-4 change of restitution moves it by up to
 20 %). Writes ``bench/results/audit_memory.json``.
 
-    python bench/audit_memory.py [--t1 0.4] [--no-steps] [--before FILE]
+    python bench/audit_memory.py [--t1 0.4] [--no-steps] [--before FILE] [--half 50] [--out FILE]
 
 The "before" step counts are this script run with the jaxcrank of commit a11de35
 (``git checkout a11de35 -- jaxcrank``; it has no ``jaxcrank.analysis.validation.memory_audit``: the step counts
@@ -40,11 +40,10 @@ def steps(mech, t1: float, half: int = 50) -> dict:
     """Accepted and rejected tsit5 steps of ``mech`` over ``t1`` s (samples every 0.1 deg
     as in `jaxcrank simulate`), for its restitution and the ``2 half + 1`` restitutions
     0.9 + 1e-4 k, k = -half..half."""
-    import equinox as eqx
     import jax.numpy as jnp
 
-    def count(e):  # e traced (an array): one compilation for all 21
-        m = eqx.tree_at(lambda m: m.contact.restitution, mech, e)
+    def count(e):  # e traced (an array): one compilation for all of them
+        m = jc.set_parameter(mech, "contact.restitution", e)
         sim = jc.simulate(m, t1)
         return int(sim.num_steps), int(sim.num_rejected)
 
@@ -54,7 +53,7 @@ def steps(mech, t1: float, half: int = 50) -> dict:
     counts = [count(jnp.asarray(e)) for e in rs]
     accepted = [c[0] for c in counts]
     return {
-        "own": {"restitution": float(mech.contact.restitution), "accepted": own[0], "rejected": own[1]},
+        "own": {"restitution": jc.get_parameter(mech, "contact.restitution"), "accepted": own[0], "rejected": own[1]},
         "restitutions": rs,
         "accepted": accepted,
         "rejected": [c[1] for c in counts],
@@ -91,11 +90,13 @@ def main():
     parser.add_argument("--no-steps", action="store_true", help="skip the step counts")
     parser.add_argument("--no-audit", action="store_true", help="step counts only")
     parser.add_argument("--before", type=Path, help="step counts of the jaxcrank before, to compare with")
+    parser.add_argument("--half", type=int, default=50, help="the ensemble's restitutions 0.9 + 1e-4 k, |k| <= half")
+    parser.add_argument("--out", type=Path, help="where to write the JSON (default: bench/results/)")
     args = parser.parse_args()
     report = {"machine": machine(), "t1_s": args.t1, "runs": {}, "steps": {}}
     if not args.no_steps:
         for name, overrides in SETTINGS.items():
-            report["steps"][name] = steps(config.apply_overrides(jc.paper(), overrides), args.t1)
+            report["steps"][name] = steps(config.apply_overrides(jc.paper(), overrides), args.t1, args.half)
             if args.before is not None:
                 before = json.loads(args.before.read_text())["steps"][name]
                 report["steps"][name]["versus_before"] = compare(before, report["steps"][name])
@@ -105,7 +106,7 @@ def main():
         from jaxcrank import audit
 
         onsets, wall = timed(lambda mech=mech: audit.onsets(mech, args.t1, max_steps=400_000))
-        vmin = float(mech.contact.min_approach_speed)
+        vmin = jc.get_parameter(mech, "memory.min_approach_speed")
         err = onsets.relative_error
         report["runs"][name] = {
             "overrides": overrides,
@@ -126,7 +127,9 @@ def main():
             ],
         }
         print(name, json.dumps(report["runs"][name]["whole_run"]), flush=True)
-    out = Path(__file__).parent / "results" / ("audit_memory.json" if not args.no_audit else "steps_only.json")
+    out = args.out or Path(__file__).parent / "results" / (
+        "audit_memory.json" if not args.no_audit else "steps_only.json"
+    )
     out.write_text(json.dumps(report, indent=1) + "\n")
 
 

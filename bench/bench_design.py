@@ -98,7 +98,7 @@ def heldout_program(problem, heldout=HELDOUT):
 
     def one(x, dphi):
         mech = problem.mechanism(x)
-        mech = eqx.tree_at(lambda m: m.initial_crank_angle, mech, mech.initial_crank_angle + dphi)
+        mech = eqx.tree_at(lambda m: m.driver.initial_angle, mech, mech.driver.initial_angle + dphi)
         period = mech.period
         n = revs * heldout["samples_per_revolution"]
         ts = jnp.linspace(0.0, revs * period, n + 1)

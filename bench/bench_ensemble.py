@@ -135,14 +135,15 @@ def kernel_cpu(base, names, xs, settings, threads):
     return entry, out.metrics, out.status
 
 
-def ks_tests(a, b, sa, sb):
-    """Two-sample KS statistic and p-value of every metric over the ok designs of each engine."""
+def ks_tests(base, a, b, sa, sb):
+    """Two-sample KS statistic and p-value of every metric of ``base`` (the sweep's columns)
+    over the ok designs of each engine."""
     from scipy import stats
 
-    from jaxcrank.analysis.metrics import METRICS
+    from jaxcrank.runs.sweep import metric_names
 
     out = {}
-    for j, key in enumerate(METRICS):
+    for j, key in enumerate(metric_names(base)):
         x, y = a[sa == 0, j], b[sb == 0, j]
         res = stats.ks_2samp(x, y)
         out[key] = {"statistic": float(res.statistic), "p_value": float(res.pvalue)}
@@ -253,7 +254,7 @@ def main(argv=None):
         print(json.dumps(k_entry), flush=True)
         x_entry, x_metrics, x_status = xla_cpu(base, names, xs, settings, args.workers)
         print(json.dumps(x_entry), flush=True)
-        ks = ks_tests(k_metrics, x_metrics, k_status, x_status)
+        ks = ks_tests(base, k_metrics, x_metrics, k_status, x_status)
         result = {
             "machine": machine(),
             "workload": WORKLOAD.format(rev=args.revolutions, start=settings.metrics_from_revolution),

@@ -46,7 +46,7 @@ from jaxcrank import cache
 cache.enable(sys.argv[3])
 from optim.objective import Ensemble
 from optim.optimize import programs
-from optim.problem import paper_problem
+from optim.presets import paper_problem
 import dataclasses
 import diffrax
 settings = dict(settings)

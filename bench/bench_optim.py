@@ -27,7 +27,7 @@ from optim import search
 from optim.objective import Ensemble
 from optim.optimize import Settings, optimize
 from optim.optimizers import adam
-from optim.problem import paper_problem
+from optim.presets import paper_problem
 
 
 def main(argv=None):

@@ -31,7 +31,7 @@ from _common import machine
 
 from jaxcrank.numerics.kernel import engine as kernel_engine
 from jaxcrank.numerics.steady import steady_state
-from jaxcrank.physics.params import get_parameter, set_parameters
+from jaxcrank.physics.parameters import get_parameter, set_parameters
 from jaxcrank.runs import regimes
 from optim.design import design_problem
 from optim.presets import NOT_PERIODIC_SI

@@ -57,7 +57,7 @@ def jax_run(mech, t1, solver, tol, n_samples):
 def scipy_run(mech, t1, method, tol, n_samples):
     f = jax.jit(lambda t, y: model.vector_field(t, y, mech))
     jac = jax.jit(jax.jacfwd(lambda t, y: model.vector_field(t, y, mech), argnums=1))
-    y0 = np.zeros(model.state_size(mech))
+    y0 = np.asarray(model.initial_state(mech))
     f(0.0, y0).block_until_ready()
     jac(0.0, y0).block_until_ready()
     ts = np.linspace(0.0, t1, n_samples)

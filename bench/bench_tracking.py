@@ -1,7 +1,8 @@
 """Benchmark: metrics tracked during the solve (jaxcrank.numerics.tracking) against the
 same solve with stored samples, on the paper run.
 
-    python bench/bench_tracking.py [--t1 0.4] [--out bench/results/tracking.json]
+    python bench/bench_tracking.py [--t1 0.4] [--out bench/results/tracking.json] [--metrics-from S]
+        [--sweep-samples 360,3600,36000,360000]
 
 Records, in one run on this machine:
 - the paper run (tsit5, default tolerances, 10 samples per degree) saving every
@@ -23,14 +24,15 @@ import jax.numpy as jnp
 from _common import machine, timed
 
 import jaxcrank as jc
-from jaxcrank import outputs, sweep
+from jaxcrank import outputs
 
 PEAKS = ("peak_contact_force_B_N", "peak_contact_force_C_N", "max_abs_slider_ax_deviation_m_s2")
 
 
-def paper_runs(t1):
+def paper_runs(t1, start=None):
+    """The paper run stored and tracked; metrics from ``start`` (s, default one revolution)."""
     mech = jc.paper()
-    start = float(mech.period)
+    start = float(mech.period) if start is None else start
     n10 = int(round(t1 / mech.period * 3600)) + 1
     rows = {}
     for label, kwargs in (("stored_samples", {}), ("stored_samples_and_tracked", {"metrics_start": start})):
@@ -58,10 +60,12 @@ def paper_runs(t1):
     return rows, peaks
 
 
-def sweep_memory():
+def sweep_memory(samples=(360, 3600, 36_000, 360_000)):
+    from jaxcrank import sweep
+
     base = jc.paper()
     out = {}
-    for spr in (360, 3600, 36_000, 360_000):
+    for spr in samples:
         settings = sweep.Settings(revolutions=0.05, samples_per_revolution=spr, metrics_from_revolution=0.01)
         program = jax.jit(lambda x, s=settings: sweep.simulate_design(base, ("rod_length",), x, s))
         m = program.lower(jnp.array([0.403])).compile().memory_analysis()
@@ -74,8 +78,10 @@ def main(argv=None):
     p.add_argument("--t1", type=float, default=0.4, help="simulated time, s")
     p.add_argument("--out", type=Path, default=Path("bench/results/tracking.json"))
     p.add_argument("--note", default="", help="free text stored in the JSON (e.g. machine load)")
+    p.add_argument("--metrics-from", type=float, help="start of the metrics window, s (default: one revolution)")
+    p.add_argument("--sweep-samples", default="360,3600,36000,360000", help="samples per revolution of the sweep")
     args = p.parse_args(argv)
-    runs, peaks = paper_runs(args.t1)
+    runs, peaks = paper_runs(args.t1, args.metrics_from)
     plain, tracked = runs["stored_samples"], runs["stored_samples_and_tracked"]
     result = {
         "t1_s": args.t1,
@@ -83,7 +89,9 @@ def main(argv=None):
         "tracking_run_time_ratio": tracked["run_s"] / plain["run_s"],
         "same_steps": plain["steps"] == tracked["steps"] and plain["rejected"] == tracked["rejected"],
         "peaks": peaks,
-        "sweep_program_memory_by_samples_per_revolution": sweep_memory(),
+        "sweep_program_memory_by_samples_per_revolution": sweep_memory(
+            tuple(int(n) for n in args.sweep_samples.split(","))
+        ),
         "machine": machine(),
         "note": args.note,
     }

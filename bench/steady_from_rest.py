@@ -217,6 +217,7 @@ def main():
     parser.add_argument("--revolutions", type=int, default=30, help="revolutions from rest before the objective")
     parser.add_argument("--continue", dest="cont", type=int, default=25, help="revolutions of a continued run")
     parser.add_argument("--left-tol", type=float, default=1e-3, help="distance (scaled) of a run that left the orbit")
+    parser.add_argument("--max-candidates", type=int, help="screen only the first N candidates (default all)")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "steady_from_rest.json")
     args = parser.parse_args()
     prob = design_problem()
@@ -228,7 +229,7 @@ def main():
     state = {"screened": [], "evaluated": []}
     if args.out.exists():
         state = {k: json.loads(args.out.read_text())[k] for k in state}
-    cands = candidates(prob, args.sobol, args.seed)
+    cands = candidates(prob, args.sobol, args.seed)[: args.max_candidates]
     state["screened"] = screen(prob, build, cands, state["screened"])
     _write(args, state)
     pool = [r for r in state["screened"] if no_idle_memory(r)]

@@ -1,6 +1,6 @@
 """Benchmark: where a solver step's time goes on this machine's CPU.
 
-    python bench/step_cost.py [--out bench/results/step_cost.json]
+    python bench/step_cost.py [--out bench/results/step_cost.json] [--t1 0.4] [--evals 200000]
 
 Splits the paper run's wall time per solver step (accepted + rejected, tsit5 at
 rtol = atol = 1e-6, as ``jaxcrank simulate``) into:
@@ -108,14 +108,16 @@ def loop_overhead(size, t1, n_samples, steps):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, default=Path("bench/results/step_cost.json"))
+    p.add_argument("--t1", type=float, help="the paper run's length, s (default: four revolutions)")
+    p.add_argument("--evals", type=int, default=200_000, help="vector-field evaluations timed (VJPs: half)")
     a = p.parse_args(argv)
     mech = jc.paper()
-    ts = solve.sample_times(mech)
+    ts = solve.sample_times(mech, t1=a.t1)
     sim, wall = timed(lambda: solve.simulate(mech, ts=ts), warmup=1)
     attempts = int(sim.num_steps) + int(sim.num_rejected)
-    field_static = field_cost(mech, traced=False)
-    field_traced = field_cost(mech, traced=True)
-    vjp = vjp_cost(mech)
+    field_static = field_cost(mech, traced=False, n=a.evals)
+    field_traced = field_cost(mech, traced=True, n=a.evals)
+    vjp = vjp_cost(mech, n=a.evals // 2)
     overhead = loop_overhead(model.state_size(mech), float(ts[-1]), len(ts), attempts)
     per_step = wall / attempts * 1e6
     report = {

@@ -35,7 +35,7 @@ from _common import machine  # bench/ is on sys.path (python bench/stiffness.py)
 
 import jaxcrank as jc
 from jaxcrank import model, solve
-from jaxcrank.physics.params import set_parameter
+from jaxcrank.physics.parameters import set_parameter
 
 
 def tsit5_real_stability_limit() -> float:
@@ -88,8 +88,9 @@ def main(argv=None):
         ts, ys = ts[np.isfinite(ts)], ys[np.isfinite(ts)]
         dt = np.diff(ts)  # step k goes from ts[k] to ts[k + 1]; classify it by its start
         frames = jax.jit(jax.vmap(lambda t, y: model.evaluate(mech, t, y)))(ts[:-1], ys[:-1])
-        in_b = np.asarray(frames.penetration_B) > 0.0
-        in_c = np.asarray(frames.penetration_C) > 0.0
+        joints = model.structure(mech)[1].joints
+        in_b = np.asarray(frames.penetration[:, joints.index("B")]) > 0.0
+        in_c = np.asarray(frames.penetration[:, joints.index("C")]) > 0.0
         regimes = {}
         for name, mask in (
             ("both_in_contact", in_b & in_c),

@@ -27,7 +27,7 @@ from jaxcrank import simulate
 from jaxcrank.analysis.outputs import transmission_angle_error
 from optim import windows as W
 from optim.objective import EQ19, Ensemble
-from optim.problem import paper_problem
+from optim.presets import paper_problem
 
 
 def main(argv=None):

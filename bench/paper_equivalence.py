@@ -1,0 +1,108 @@
+"""The paper run on this checkout against an earlier commit, in one run: trajectories over
+the first 20 ms and the 0.4 s metrics, beside the same comparison of each code with
+itself after a rounding-level change of its start (every state entry + 1e-15 scaled
+units). After the first impacts the motion amplifies rounding, so two formulations that
+differ only in rounding differ as much as one code does from itself.
+
+    python bench/paper_equivalence.py --base cdff866   # -> bench/results/paper_equivalence.json
+
+The earlier commit's package is copied (from ``git worktree``) under the name
+``jaxcrank_base`` and imported beside this one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+COLUMNS = ["slider_x", "rod_x", "ecc_B_x", "ecc_B_y", "ecc_C_x", "ecc_C_y", "force_B_normal", "driving_moment"]
+TIMES = [0.001, 0.00125, 0.0015, 0.002, 0.005, 0.01, 0.02, 0.1, 0.4]
+PERTURBATION = 1e-15
+
+
+def _base_package(commit: str, where: Path) -> None:
+    tree = where / "tree"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), commit], check=True,
+                   capture_output=True)  # fmt: skip
+    try:
+        shutil.copytree(tree / "jaxcrank", where / "pkg" / "jaxcrank_base")
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)], check=True)
+    for path in (where / "pkg" / "jaxcrank_base").rglob("*.py"):
+        text = path.read_text()
+        text = re.sub(r"\bfrom jaxcrank\b", "from jaxcrank_base", text)
+        text = re.sub(r"\bimport jaxcrank\b", "import jaxcrank_base", text)
+        path.write_text(text)
+
+
+def _run(package, perturbation: float):
+    import jax.numpy as jnp
+
+    mech = package.paper()
+    model, outputs = package.model, package.outputs
+    ts = jnp.linspace(0.0, 0.4, 14401)
+    y0 = model.initial_state(mech) + perturbation
+    sim = package.simulate(mech, ts=ts, y0=y0, metrics_start=0.1)
+    cols = outputs.trajectory(sim)
+    return {k: np.asarray(cols[k]) for k in ["t", *COLUMNS]}, {k: float(v) for k, v in sim.metrics.items()}
+
+
+def _divergence(a, b) -> dict:
+    t = a["t"]
+    out = {}
+    for tt in TIMES:
+        i = int(np.searchsorted(t, tt)) + 1
+        out[f"{tt:g}"] = {k: float(np.max(np.abs(a[k][:i] - b[k][:i]))) for k in COLUMNS}
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--base", default="cdff866", help="the earlier commit (default: the last slider-crank-only one)")
+    p.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "paper_equivalence.json")
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        _base_package(args.base, Path(tmp))
+        sys.path.insert(0, str(Path(tmp) / "pkg"))
+        import jaxcrank_base
+
+        import jaxcrank
+
+        runs = {}
+        for name, package in (("this", jaxcrank), ("base", jaxcrank_base)):
+            for pert in (0.0, PERTURBATION):
+                runs[(name, pert)] = _run(package, pert)
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
+    metrics = {name: runs[(name, 0.0)][1] for name in ("this", "base")}
+    metrics.update({f"{name}_perturbed": runs[(name, PERTURBATION)][1] for name in ("this", "base")})
+    result = {
+        "command": "python bench/paper_equivalence.py --base " + args.base,
+        "this_commit": head,
+        "base_commit": args.base,
+        "machine": platform.processor() or platform.machine(),
+        "perturbation_scaled": PERTURBATION,
+        "max_abs_difference_up_to_t_s": {
+            "this_vs_base": _divergence(runs[("this", 0.0)][0], runs[("base", 0.0)][0]),
+            "base_vs_base_perturbed": _divergence(runs[("base", 0.0)][0], runs[("base", PERTURBATION)][0]),
+            "this_vs_this_perturbed": _divergence(runs[("this", 0.0)][0], runs[("this", PERTURBATION)][0]),
+        },
+        "metrics_after_0.1_s": metrics,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
