@@ -4,6 +4,7 @@ high-speed slider-crank (its ideal slider acceleration against the closed form).
 
 import argparse
 import itertools
+import json
 
 import equinox as eqx
 import jax
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 
 import jaxcrank as jc
-from jaxcrank import ideal, model, outputs
+from jaxcrank import cli, ideal, model, outputs
 from jaxcrank.physics.linkage import GROUND, Prismatic
 from jaxcrank.runs import config
 
@@ -168,3 +169,23 @@ def test_flores_simulates_its_first_impacts():
     k = model.structure(mech)[1].joints.index("C")
     force = np.asarray(outputs.frames(sim).normal_force[:, k])
     assert np.all(np.isfinite(np.asarray(sim.ys))) and force.max() > 0.0
+
+
+def test_cli_simulate_runs_the_four_bar_preset(tmp_path):
+    """``jaxcrank simulate --mechanism four-bar`` (10 ms): the trajectory has the four-bar's
+    bodies and the eccentricity of each clearance joint, the metrics name the rocker (the
+    output link) and no slider, the figures show each clearance joint's pin trajectory and
+    contact force and the rocker's deviations, and config.toml runs the same four-bar again."""
+    out = tmp_path / "run"
+    args = ["simulate", "--mechanism", "four-bar", "--out", str(out), "--t1", "0.01", "--samples-per-degree", "1"]
+    assert cli.main([*args, "--quiet"]) == 0
+    header = (out / "trajectory.csv").read_text().splitlines()[0].split(",")
+    assert {"rocker_angle", "ideal_rocker_angle", "ecc_B_x", "ecc_C_y", "transmission_angle"} <= set(header)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["solver"]["steps"] > 0 and "rms_rocker_angle_deviation_deg" in summary["metrics"]
+    assert not any("slider" in k for k in summary["metrics"]) and summary["units"]["rocker_angle"] == "deg"
+    figures = {p.name for p in (out / "figures").glob("*.png")}
+    assert {"pin_trajectories.png", "contact_force.png", "rocker_angle.png", "rocker_acceleration.png"} <= figures
+    again, preset = config.load(out / "config.toml"), jc.four_bar()
+    assert isinstance(again, jc.FourBar) and jax.tree.structure(again) == jax.tree.structure(preset)
+    assert [float(v) for v in jax.tree.leaves(again)] == [float(v) for v in jax.tree.leaves(preset)]
