@@ -45,11 +45,24 @@ def _batch_fn(names: tuple[str, ...], settings: Settings, batched: bool):
     return eqx.filter_jit(shard)
 
 
-@functools.lru_cache(maxsize=32)
+#: batch_bytes' results by (the base's structure and parameter values, names, settings, batch):
+#: a mechanism holds dicts (its joints), so it is no key of functools' caches itself
+_BATCH_BYTES: dict = {}
+
+
 def batch_bytes(base: Mechanism, names: tuple[str, ...], settings: Settings, batch: int) -> int:
     """Device memory, bytes, that XLA plans for solving ``batch`` designs in one ``vmap``
     batch on the default device (temporaries and outputs of the compiled program)."""
     names = tuple(names)
+    leaves, treedef = jax.tree.flatten(base)
+    key = (str(treedef), tuple(np.asarray(v).tobytes() for v in leaves), names, settings, int(batch))
+    if key not in _BATCH_BYTES:
+        _BATCH_BYTES[key] = _batch_bytes(base, names, settings, int(batch))
+    return _BATCH_BYTES[key]
+
+
+def _batch_bytes(base: Mechanism, names: tuple[str, ...], settings: Settings, batch: int) -> int:
+
     params, static = eqx.partition(base, eqx.is_array)
 
     def shard(p, xs):
