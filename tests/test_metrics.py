@@ -54,7 +54,7 @@ sim = jc.simulate(jc.paper(), 0.005, n_samples=181, metrics_start=0.001)
 summary = outputs.summary_metrics(sim)
 out["summary"] = {k: float(v).hex() for k, v in summary.items()}
 values = np.asarray(sensitivity.metric_values(sim))
-out["sensitivity"] = {k: float(v).hex() for k, v in zip(sensitivity.METRICS, values)}
+out["sensitivity"] = {k: float(v).hex() for k, v in zip(sensitivity.metric_names(jc.paper()), values)}
 print(json.dumps(out))
 """
 
