@@ -2,9 +2,12 @@
 the first 20 ms and the 0.4 s metrics, beside the same comparison of each code with
 itself after a rounding-level change of its start (every state entry + 1e-15 scaled
 units). After the first impacts the motion amplifies rounding, so two formulations that
-differ only in rounding differ as much as one code does from itself.
+differ only in rounding differ as much as one code does from itself. For the 0.4 s
+metrics each code also runs ``--starts`` starts (every entry + k * 1e-15, k = 0, 1, ...):
+their mean and standard deviation per code, and the difference of the two means in units
+of its standard error.
 
-    python bench/paper_equivalence.py --base cdff866   # -> bench/results/paper_equivalence.json
+    python bench/paper_equivalence.py --base cdff866 [--starts 8]   # -> bench/results/paper_equivalence.json
 
 The earlier commit's package is copied (from ``git worktree``) under the name
 ``jaxcrank_base`` and imported beside this one.
@@ -66,9 +69,28 @@ def _divergence(a, b) -> dict:
     return out
 
 
+def _over_starts(spread: dict) -> dict:
+    """Per metric both codes share: each code's mean and sample standard deviation over its
+    starts, and the difference of the means over its standard error."""
+    out = {}
+    for key in sorted(set(spread["this"][0]) & set(spread["base"][0])):
+        a = np.array([m[key] for m in spread["this"]])
+        b = np.array([m[key] for m in spread["base"]])
+        se = float(np.sqrt(a.var(ddof=1) / a.size + b.var(ddof=1) / b.size))
+        out[key] = {
+            "this_mean": float(a.mean()),
+            "this_std": float(a.std(ddof=1)),
+            "base_mean": float(b.mean()),
+            "base_std": float(b.std(ddof=1)),
+            "difference_over_standard_error": float((a.mean() - b.mean()) / se) if se > 0 else 0.0,
+        }
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--base", default="cdff866", help="the earlier commit (default: the last slider-crank-only one)")
+    p.add_argument("--starts", type=int, default=8, help="starts per code for the metrics' spread (>= 2)")
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "paper_equivalence.json")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
@@ -78,15 +100,16 @@ def main(argv=None) -> int:
 
         import jaxcrank
 
-        runs = {}
+        runs, spread = {}, {"this": [], "base": []}
         for name, package in (("this", jaxcrank), ("base", jaxcrank_base)):
-            for pert in (0.0, PERTURBATION):
-                runs[(name, pert)] = _run(package, pert)
+            for k in range(max(args.starts, 2)):
+                runs[(name, k * PERTURBATION)] = _run(package, k * PERTURBATION)
+                spread[name].append(runs[(name, k * PERTURBATION)][1])
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
     metrics = {name: runs[(name, 0.0)][1] for name in ("this", "base")}
     metrics.update({f"{name}_perturbed": runs[(name, PERTURBATION)][1] for name in ("this", "base")})
     result = {
-        "command": "python bench/paper_equivalence.py --base " + args.base,
+        "command": f"python bench/paper_equivalence.py --base {args.base} --starts {args.starts}",
         "this_commit": head,
         "base_commit": args.base,
         "machine": platform.processor() or platform.machine(),
@@ -97,6 +120,7 @@ def main(argv=None) -> int:
             "this_vs_this_perturbed": _divergence(runs[("this", 0.0)][0], runs[("this", PERTURBATION)][0]),
         },
         "metrics_after_0.1_s": metrics,
+        "metrics_over_starts": _over_starts(spread),
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2))
