@@ -80,9 +80,8 @@ def chunk_that_fits(
     """A number of designs per device whose batch XLA plans within ``headroom`` times
     ``free_bytes`` (bytes), at least 1: the plans of batches of 2 and 8 designs give the
     fixed and the per-design bytes, and the chunk they predict is checked against XLA's
-    plan of that batch and shrunk in proportion until it fits (a batch's memory grows
-    faster than linearly at some sizes: measured for the paper preset, 4 700 bytes per
-    design at 76 designs against 2 800 between 2 and 8)."""
+    plan of that batch and shrunk in proportion until it fits (a batch's memory can grow
+    faster than linearly with its size)."""
     names = tuple(names)
     target = headroom * free_bytes
     two, eight = batch_bytes(base, names, settings, 2), batch_bytes(base, names, settings, 8)
