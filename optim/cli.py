@@ -150,8 +150,7 @@ def add_arguments(p):
 
 
 def _settings(args):
-    if args.resume and not args.out.is_dir():
-        raise ParameterError(f"--resume: {args.out} does not exist; there is no run to continue (drop --resume)")
+    mech_config.check_resume(args.out, args.resume)
     cfg = {}
     resumed = args.resume and (args.out / "optimize.toml").exists() and args.config is None
     if args.config or resumed:

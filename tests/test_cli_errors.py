@@ -4,6 +4,7 @@ exit code 2 and no traceback (none of these cases reaches a solve)."""
 import json
 
 import numpy as np
+import pytest
 
 from jaxcrank.runs.cli import main
 
@@ -51,9 +52,16 @@ def test_missing_config_file(tmp_path, capsys):
     _one_line_error(capsys, code, "nope.toml")
 
 
-def test_resume_of_a_missing_run_directory_creates_nothing(tmp_path, capsys):
+@pytest.mark.parametrize("command", ["optimize", "sweep", "regimes"])
+def test_resume_of_a_missing_run_directory_creates_nothing(tmp_path, capsys, command):
+    """``--resume`` into a directory that does not exist is a one-line error that creates
+    nothing, for every command that resumes (a sweep or regime map would otherwise start
+    a fresh run and exit 0)."""
     out = tmp_path / "never_ran"
-    code = main(["optimize", "--out", str(out), "--resume", "--quiet"])
+    spec = tmp_path / "spec.toml"
+    spec.write_text('sampling = "grid"\n[parameters.clearance_C]\nvalues = [2.5e-4, 3e-4]\n')
+    args = [] if command == "optimize" else ["--spec", str(spec)]
+    code = main([command, *args, "--out", str(out), "--resume", "--quiet"])
     _one_line_error(capsys, code, "--resume", str(out), "does not exist")
     assert not out.exists()
 

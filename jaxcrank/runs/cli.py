@@ -256,13 +256,14 @@ def run_sweep(args) -> int:
     import jax
 
     from ..analysis import metrics
-    from . import engines, plots, sweep
+    from . import config, engines, plots, sweep
     from . import spec as spec_module
 
     if args.distributed or args.coordinator:
         jax.distributed.initialize(
             coordinator_address=args.coordinator, num_processes=args.num_processes, process_id=args.process_id
         )
+    config.check_resume(args.out, args.resume)
     spec = spec_module.load_spec(args.spec, args)
     out = args.out
     if jax.process_index() == 0:

@@ -207,6 +207,17 @@ def apply_overrides(mech: AbstractMechanism, overrides: list[str]) -> AbstractMe
     return from_dict(data, base=mech)
 
 
+def check_resume(out: Path, resume: bool) -> None:
+    """The check of a command's ``--resume``, before it creates anything: a run can only be
+    continued in a directory that exists.
+
+    Raises:
+        ParameterError: ``resume`` with no directory ``out``.
+    """
+    if resume and not Path(out).is_dir():
+        raise ParameterError(f"--resume: {out} does not exist; there is no run to continue (drop --resume)")
+
+
 def add_mechanism_arguments(p, command: str) -> None:
     """Add the options that choose the mechanism a command runs on to the argparse parser
     ``p``: ``--mechanism NAME``, ``--config FILE`` or ``--design RESULT_JSON``, ``--set

@@ -138,8 +138,9 @@ def regime_map(table, mech, names, path: Path) -> Path:
 
 
 def run(args) -> int:
-    from . import regimes
+    from . import config, regimes
 
+    config.check_resume(args.out, args.resume)
     spec, options = load(args.spec, args)
     options = options.replace(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     if args.threads is not None and args.threads < 1:
