@@ -1,5 +1,5 @@
 """1-D scans of the Eq. 19 objective along each design variable, and the
-gradients measured against them (issue 3's evidence for the gradient formulation).
+gradients measured against them (the evidence behind the gradient formulation).
 
     python -m optim.scans --out runs/scans            # paper problem (minutes)
     python -m optim.scans --out runs/scans --quick    # short window, coarse

@@ -1,8 +1,11 @@
 """The docs: generated tables match the bench JSON, every module has an API page, the README is short."""
 
 import importlib.util
+import os
 import re
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -93,3 +96,59 @@ def test_readme_is_short_and_gives_the_ci_test_command():
     assert "python -m pytest -m long" in readme
     for link in re.findall(r"\]\(((?:docs|notebooks)/[^)#]+)", readme):
         assert (ROOT / link).exists(), link
+
+
+#: a Sphinx cross-reference role (``:func:`x```), which mkdocstrings renders as literal text
+SPHINX_ROLE = re.compile(r":(?:func|class|mod|meth|attr|data|obj|exc|ref|py:\w+):`")
+
+
+def _docstrings():
+    """(where, text) of every docstring of jaxcrank and optim (the API pages' text)."""
+    import ast
+
+    for path in sorted([*(ROOT / "jaxcrank").rglob("*.py"), *(ROOT / "optim").rglob("*.py")]):
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+                text = ast.get_docstring(node, clean=False)
+                if text:
+                    yield f"{path.relative_to(ROOT)}:{getattr(node, 'name', 'module')}", text
+
+
+def test_no_sphinx_role_or_rest_literal_block_in_the_docs():
+    """The docs are Markdown (mkdocstrings, Google style): a Sphinx role or a reST literal
+    block (a line ending in ``::``) would show up as raw text on the site. Checked in the
+    pages, the README and every docstring the API pages render."""
+    texts = [(str(p.relative_to(ROOT)), p.read_text()) for p in [ROOT / "README.md", *(ROOT / "docs").glob("*.md")]]
+    found = []
+    for where, text in [*texts, *_docstrings()]:
+        fenced = False
+        for line in text.splitlines():
+            if line.strip().startswith("```"):
+                fenced = not fenced
+                continue
+            if fenced:
+                continue
+            if SPHINX_ROLE.search(line) or line.rstrip().endswith("::"):
+                found.append(f"{where}: {line.strip()}")
+    assert not found, "\n".join(found)
+
+
+@pytest.mark.slow  # the whole site with its API pages (about a minute)
+def test_the_site_builds_strict_so_every_cross_reference_resolves(tmp_path):
+    """``mkdocs build --strict`` (what CI runs): an unresolved cross-reference, a broken link
+    or anchor, or a page outside the nav fails the build."""
+    import shutil
+    import subprocess
+    import sys
+
+    if shutil.which("mkdocs") is None and importlib.util.find_spec("mkdocs") is None:
+        pytest.skip("mkdocs is not installed (pip install -e '.[docs]')")
+    run = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
+    )
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]

@@ -46,15 +46,17 @@ problems have few variables. [`steady_value_and_grad`][jaxcrank.numerics.steady.
 functional of one period of the orbit. The building blocks (maps, Newton, batch means) live in
 [`jaxcrank.numerics.shooting`][].
 
-Example::
+Example:
 
-    steady = jaxcrank.steady_state(mech)            # settle, shoot, classify
-    steady.regime, steady.multiplier_moduli         # "periodic", |mu| largest first
-    steady.metrics["rms_transmission_angle_error_deg"]
-    value, grad = steady_value_and_grad(
-        lambda sim: sim.metrics["rms_transmission_angle_error_deg"], build, params, steady
-    )
-    nxt = jaxcrank.steady_state(build(params2), warm_start=steady)   # a few revolutions
+```python
+steady = jaxcrank.steady_state(mech)            # settle, shoot, classify
+steady.regime, steady.multiplier_moduli         # "periodic", |mu| largest first
+steady.metrics["rms_transmission_angle_error_deg"]
+value, grad = steady_value_and_grad(
+    lambda sim: sim.metrics["rms_transmission_angle_error_deg"], build, params, steady
+)
+nxt = jaxcrank.steady_state(build(params2), warm_start=steady)   # a few revolutions
+```
 """
 
 from __future__ import annotations

@@ -128,10 +128,12 @@ class SliderCrank(AbstractMechanism):
         Closure, with ``d_B``, ``d_C`` the pin eccentricities (|d| <= rho = c + max_penetration
         at a clearance joint, 0 at an ideal one; the ground pivot's play adds to B's, as it
         moves the crank pin alike: rho_B + rho_A below) and ``D = d_B - d_C`` (|D| <= play =
-        rho_B + rho_C)::
+        rho_B + rho_C):
 
-            dx3 = -D_x + L2 (cos theta2 - cos theta2_ideal),   L2 (sin theta2 - sin theta2_ideal) = D_y
-            dx2 = -d_Bx + (L2 / 2) (cos theta2 - cos theta2_ideal)
+        ```text
+        dx3 = -D_x + L2 (cos theta2 - cos theta2_ideal),   L2 (sin theta2 - sin theta2_ideal) = D_y
+        dx2 = -d_Bx + (L2 / 2) (cos theta2 - cos theta2_ideal)
+        ```
 
         ``|sin theta2_ideal| <= s_m = (L1 + |e|) / L2``, and the cosine changes most at the
         steepest point: ``L2 |cos theta2 - cos theta2_ideal| <= L2 g(|D_y|)`` with
