@@ -78,7 +78,6 @@ import tomli_w
 from jaxcrank import cache, reference
 from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
-from jaxcrank.physics.presets import SliderCrank
 
 from .objective import AbstractObjective, Ensemble, Pathwise
 from .optimize import Settings, multistart, optimize
@@ -402,15 +401,16 @@ def run(args) -> int:
         **({"start_runs": res["runs"], "best_start": res["best_start"]} if "runs" in res else {}),
         **({"grid": grid_info} if grid_info else {}),
         "final_regime": _regime(problem, res["final"]) if args.regime else None,
-        **({"paper": _paper()} if isinstance(problem.base, SliderCrank) else {}),
+        **({"paper": _paper()} if cfg.get("problem", "paper") in ("paper", "robust") else {}),
     }
     (out / "result.json").write_text(json.dumps(result, indent=2))
     print(
         f"{problem.description}: {f_start:.5f} -> {res['final_objective']:.5f} deg "
         f"({result['reduction_percent']:.2f} % lower) at "
-        + ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, res["final"]))
+        + ", ".join(f"{n} = {v * plots.factor(n):.6g} {plots.unit(n)}" for n, v in zip(problem.names, res["final"]))
         + (f"; grid best {grid_info['best_objective_deg']:.5f} deg" if grid_info else "")
     )
+    print(f"{'converged' if result['converged'] else 'not converged'}: {res['stop_reason']}")
     print(f"simulate the final design: {result['simulate_command']}")
     return 0
 

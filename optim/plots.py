@@ -32,6 +32,11 @@ def factor(name):
     return _unit(name)[1]
 
 
+def unit(name):
+    """The unit a design variable is shown in (``mm``, ``deg`` or ``SI``)."""
+    return _unit(name)[2]
+
+
 def plot_scans(csv_path: Path, report: dict, png: Path):
     with open(csv_path) as f:
         rows = list(csv.DictReader(f))

@@ -181,11 +181,11 @@ TOML spec (SI units; every key but [parameters] optional):
   samples = 64         # lhs, random, monte_carlo: number of designs
   points = 11          # oat: points per line
   seed = 0             # lhs, random, monte_carlo
-  chunk = 1            # designs solved together (and per checkpoint); default: 1 per device on
-                       # a CPU (each solved alone); on a GPU the largest vmap batch per device
-                       # that fits in 80 % of its free memory (1024 per device where the
-                       # backend reports none); a chunk needing more than the free memory
-                       # is refused
+  chunk = 16           # designs solved together (and per checkpoint); default by engine:
+                       # kernel 16 per CPU thread; xla 1 per device on a CPU (each solved
+                       # alone), on a GPU a vmap batch per device that fits in 80 % of its
+                       # free memory (1024 per device where the backend reports none); a
+                       # chunk needing more than the free memory is refused
   metrics = ["max_abs_slider_x_deviation_m", "peak_contact_force_C_N"]  # plotted (all are computed;
                        # the names are the mechanism's, e.g. max_abs_rocker_angle_deviation_deg)
   mechanism = "four-bar"  # the base mechanism: a preset (paper, four-bar, ...) or a [mechanism] table

@@ -66,8 +66,9 @@ def _section_eccentricities(steady):
 def poincare_plot(steady, path: Path) -> Path:
     """The Poincare section (crank at its initial angle, once per revolution): pin
     eccentricity in each clearance bearing, in units of its clearance, at the settle's
-    section points (coloured by revolution) and at the orbit's start state; and the
-    distance of the section points to that state, scaled units, by revolution."""
+    section points (coloured by revolution) and at the orbit's start state; and, by
+    revolution, the distance of the section points to that state (periodic) or to the
+    section point before (not periodic), scaled units."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -78,12 +79,19 @@ def poincare_plot(steady, path: Path) -> Path:
     fig, axes = plt.subplots(1, len(ecc) + 1, figsize=(5 * (len(ecc) + 1), 4.6), squeeze=False)
     m = np.asarray(steady.monodromy).shape[0]
     pts_all = np.asarray(steady.section_points)[:, :m]
-    gap = np.max(np.abs(pts_all - np.asarray(steady.section_state)[:m]), axis=1)
     ax = axes[0, -1]
-    ax.semilogy(np.arange(len(gap)), np.maximum(gap, 1e-16), "o-", ms=3)
+    if steady.regime == "periodic":
+        gap = np.max(np.abs(pts_all - np.asarray(steady.section_state)[:m]), axis=1)
+        revs = np.arange(len(gap))
+        ax.set_ylabel("max |y_n - y*| (scaled: clearances)")
+        ax.set_title("distance to the orbit's start")
+    else:  # the last section point is the state shown: compare each point with the one before instead
+        gap = np.max(np.abs(np.diff(pts_all, axis=0)), axis=1)
+        revs = np.arange(1, len(gap) + 1)
+        ax.set_ylabel("max |y_n - y_(n-1)| (scaled: clearances)")
+        ax.set_title("distance between successive section points")
+    ax.semilogy(revs, np.maximum(gap, 1e-16), "o-", ms=3)
     ax.set_xlabel("revolution of the settle")
-    ax.set_ylabel("max |y_n - y*| (scaled: clearances)")
-    ax.set_title("distance to the orbit's start" if steady.regime == "periodic" else "distance to the last point")
     for ax, (joint, (pts, star)) in zip(axes[0], ecc.items()):
         theta = np.linspace(0, 2 * np.pi, 200)
         ax.plot(np.cos(theta), np.sin(theta), color="0.6", lw=0.8, label="clearance circle")
