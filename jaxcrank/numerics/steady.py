@@ -62,6 +62,7 @@ nxt = jaxcrank.steady_state(build(params2), warm_start=steady)   # a few revolut
 from __future__ import annotations
 
 import math
+import sys
 
 import diffrax
 import equinox as eqx
@@ -212,6 +213,7 @@ def steady_state(
     samples_per_revolution: int = 3600,
     options: SolveOptions = STEADY_DEFAULTS,
     throw: bool = True,
+    progress: bool = False,
 ) -> SteadyState:
     """The steady state of ``mech``: its periodic orbit and stability, or, when it has no
     attracting periodic orbit of period <= ``max_period``, its Lyapunov exponent and
@@ -242,6 +244,8 @@ def steady_state(
         options: solve settings (`STEADY_DEFAULTS`: rtol = atol = 1e-10).
         throw: raise [`SteadyStateError`][jaxcrank.numerics.steady.SteadyStateError] when the result is not
             ``RESULTS.successful``; with ``False`` inspect ``SteadyState.result``.
+        progress: report each phase on standard error (settle with a progress bar,
+            shooting, orbit, statistics), for command-line runs.
 
     Returns:
         a [`SteadyState`][jaxcrank.numerics.steady.SteadyState].
@@ -264,9 +268,10 @@ def steady_state(
     counts = {"settle": 0, "shooting": 0, "orbit": 0, "statistics": 0}
     y0 = model.initial_state(mech) if warm_start is None else _warm_state(mech, warm_start)
     warm_k = warm_start.period_revolutions if isinstance(warm_start, SteadyState) and warm_start.periodic else 0
+    say = _say if progress else (lambda text: None)
     out = _steady(
         mech, y0, warm_k, settle_revolutions, max_period, recurrence_tol, newton_tol, max_newton,
-        statistics_revolutions, batch_revolutions, samples_per_revolution, options, counts,
+        statistics_revolutions, batch_revolutions, samples_per_revolution, options, counts, say,
     )  # fmt: skip
     if throw and out.result != RESULTS.successful:
         raise SteadyStateError(
@@ -276,11 +281,20 @@ def steady_state(
     return out
 
 
+def _say(text: str) -> None:
+    """One line of progress on standard error."""
+    print(f"steady: {text}", file=sys.stderr, flush=True)
+
+
 def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, max_newton, n_stats, batch, samples,
-            options, counts):  # fmt: skip
+            options, counts, say):  # fmt: skip
     m = shooting.dynamic_size(mech)
     n_settle = warm_k if warm_k else settle
-    sim = simulate(mech, ts=shooting.section_times(mech, n_settle), y0=y0, options=options, throw=False)
+    say(f"settling {n_settle} revolution(s) from {'the warm start' if warm_k else 'rest'}")
+    sim = simulate(
+        mech, ts=shooting.section_times(mech, n_settle), y0=y0, options=options, throw=False,
+        progress=say is _say,
+    )  # fmt: skip
     counts["settle"] += n_settle
     section = sim.ys
     empty = dict(
@@ -306,6 +320,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         candidates = [min(distances, key=distances.get)]
     failure = None
     for k in candidates:
+        say(f"shooting for a period-{k} orbit (Newton, at most {max_newton} iterations of {k} revolution(s))")
         z, jac, active, res, its, result = shooting.shoot(mech, z_end, k, None, options, newton_tol, max_newton)
         counts["shooting"] += k * (its + 1)
         if result != RESULTS.successful:
@@ -314,6 +329,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         mult = shooting.multipliers(jac, active)
         if np.max(np.abs(mult), initial=0.0) >= 1.0:
             break  # an unstable orbit: the motion does not settle onto it
+        say(f"periodic (residual {float(res):.2g} after {its} Newton iteration(s)): solving the orbit's metrics")
         orbit = period_solve(mech, shooting.full(z), k, options=options, samples_per_revolution=samples)
         counts["orbit"] += k
         if not orbit.ok:
@@ -331,11 +347,13 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
     else:
         if failure is not None and not near:
             if warm_k:  # the warm start was too far: settle from there and start over
+                say("shooting from the warm start failed: settling from there")
                 return _steady(mech, section[-1], 0, settle, max_period, recurrence_tol, newton_tol, max_newton,
-                               n_stats, batch, samples, options, counts)  # fmt: skip
+                               n_stats, batch, samples, options, counts, say)  # fmt: skip
             result, res, its = failure
             return SteadyState(result=result, regime="not periodic", residual=res, **dict(empty, newton_iterations=its))
     recurrence = float(jnp.max(jnp.abs(z_end - section[-2, :m])))
+    say(f"no period up to {max_period} revolution(s): Lyapunov exponent and statistics over {n_stats} revolutions")
     jac, result, lyapunov, statistics, z_last = shooting.not_periodic(
         mech, z_end, options, n_stats, batch, samples, counts
     )

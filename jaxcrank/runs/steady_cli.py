@@ -39,6 +39,7 @@ def add_arguments(p):
     p.add_argument("--atol", type=float, default=STEADY_DEFAULTS.atol, help="absolute tolerance (1e-10)")
     p.add_argument("--max-steps", type=int, default=STEADY_DEFAULTS.max_steps, help="step budget per solve (2000000)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no progress on standard error")
     return p
 
 
@@ -171,6 +172,7 @@ def run(args) -> int:
         batch_revolutions=args.batch_revolutions,
         samples_per_revolution=args.samples_per_revolution,
         options=options,
+        progress=not args.quiet,
     )
     wall = time.perf_counter() - start
     data = summary(steady, wall, args)
