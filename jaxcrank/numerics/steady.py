@@ -255,15 +255,9 @@ def steady_state(
         SteadyStateError: with ``throw=True``, when a solve or the shooting failed.
     """
     shooting.check_arguments(
-        settle_revolutions,
-        max_period,
-        recurrence_tol,
-        newton_tol,
-        max_newton,
-        statistics_revolutions,
-        batch_revolutions,
-        samples_per_revolution,
-    )
+        settle_revolutions, max_period, recurrence_tol, newton_tol, max_newton, statistics_revolutions,
+        batch_revolutions, samples_per_revolution,
+    )  # fmt: skip
     shooting.check_periodic_driver(mech)
     counts = {"settle": 0, "shooting": 0, "orbit": 0, "statistics": 0}
     y0 = model.initial_state(mech) if warm_start is None else _warm_state(mech, warm_start)
@@ -291,10 +285,8 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
     m = shooting.dynamic_size(mech)
     n_settle = warm_k if warm_k else settle
     say(f"settling {n_settle} revolution(s) from {'the warm start' if warm_k else 'rest'}")
-    sim = simulate(
-        mech, ts=shooting.section_times(mech, n_settle), y0=y0, options=options, throw=False,
-        progress=say is _say,
-    )  # fmt: skip
+    sim = simulate(mech, ts=shooting.section_times(mech, n_settle), y0=y0, options=options, throw=False,
+                   progress=say is _say)  # fmt: skip
     counts["settle"] += n_settle
     section = sim.ys
     empty = dict(
