@@ -264,13 +264,24 @@ def _label(col: str) -> str:
     return col
 
 
+def _shown(col: str) -> tuple[str, float]:
+    """(axis label, factor from the column's SI values) of a table column: lengths (m) in mm,
+    everything else in its SI unit."""
+    label = _label(col)
+    if label.endswith(" [m]"):
+        return label[: -len(" [m]")] + " [mm]", 1e3
+    return label, 1.0
+
+
 def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
     """Figures of a sweep table ([`jaxcrank.runs.sweep.read_table`][jaxcrank.runs.sweep_table.read_table]) into
     ``out_dir``:
-    heat maps for two-parameter grids, metric-vs-parameter lines (mean and min-max
-    band over the other parameters) for grids and one-at-a-time lines, scatter plots
-    for LHS / random samples, histograms for Monte Carlo. Failed designs are drawn
-    as crosses on heat maps and left out elsewhere."""
+    heat maps for two-parameter grids, metric-vs-parameter plots (the mean at each level
+    with a bar from the minimum to the maximum over the other parameters; points, not
+    joined, since a metric between two levels can be anything where the motion is chaotic)
+    for grids and one-at-a-time lines, scatter plots for LHS / random samples, histograms
+    for Monte Carlo. Lengths are shown in mm. Failed designs are drawn as crosses on heat
+    maps and left out elsewhere."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     ok = np.asarray(table["status"]) == "ok"
@@ -283,20 +294,22 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
         files.append(out_dir / name)
 
     if sampling == "grid" and len(param_cols) == 2:
-        a, b = (np.asarray(table[c]) for c in param_cols)
+        (la, fa), (lb, fb) = (_shown(c) for c in param_cols)
+        a, b = (np.asarray(table[c]) * f for c, f in zip(param_cols, (fa, fb)))
         ua, ub = np.unique(a), np.unique(b)
         for m in metrics:
+            lm, fm = _shown(m)
             z = np.full((len(ua), len(ub)), np.nan)
-            z[np.searchsorted(ua, a[ok]), np.searchsorted(ub, b[ok])] = np.asarray(table[m])[ok]
+            z[np.searchsorted(ua, a[ok]), np.searchsorted(ub, b[ok])] = np.asarray(table[m])[ok] * fm
             fig, ax = plt.subplots(figsize=(6, 4.8))
             im = ax.pcolormesh(ub, ua, z, shading="nearest", cmap="viridis")
-            fig.colorbar(im, ax=ax, label=_label(m))
+            fig.colorbar(im, ax=ax, label=lm)
             if (~ok).any():
                 ax.plot(b[~ok], a[~ok], "rx", label="failed / invalid")
                 ax.legend(fontsize=8)
-            ax.set_xlabel(_label(param_cols[1]))
-            ax.set_ylabel(_label(param_cols[0]))
-            ax.set_title(m)
+            ax.set_xlabel(lb)
+            ax.set_ylabel(la)
+            ax.set_title(lm.split(" [")[0])
             save(fig, f"heatmap_{m}.png")
     if sampling == "monte_carlo":
         for m in metrics:
@@ -312,10 +325,12 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
             save(fig, f"histogram_{m}.png")
         return files
     for c in param_cols:
-        x = np.asarray(table[c])
+        lc, fc = _shown(c)
+        x = np.asarray(table[c]) * fc
         fig, axes = plt.subplots(len(metrics), 1, figsize=(7, 2.2 * len(metrics)), sharex=True, squeeze=False)
         for ax, m in zip(axes[:, 0], metrics):
-            y = np.asarray(table[m])
+            lm, fm = _shown(m)
+            y = np.asarray(table[m]) * fm
             if sampling in ("lhs", "random"):
                 ax.plot(x[ok], y[ok], ".", ms=4)
             else:
@@ -329,13 +344,14 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
                     )
                 xs = np.unique(x[sel])
                 stats = [y[sel & (x == v)] for v in xs]
-                ax.plot(xs, [s.mean() for s in stats], "o-", ms=3)
-                ax.fill_between(xs, [s.min() for s in stats], [s.max() for s in stats], alpha=0.25)
-            ax.set_ylabel(_label(m), fontsize=7)
-        axes[-1, 0].set_xlabel(_label(c))
+                mean = np.array([s.mean() for s in stats])
+                low, high = mean - [s.min() for s in stats], [s.max() for s in stats] - mean
+                ax.errorbar(xs, mean, yerr=[low, high], fmt="o", ms=3, capsize=2, lw=0.8)
+            ax.set_ylabel(lm, fontsize=7)
+        axes[-1, 0].set_xlabel(lc)
         axes[0, 0].set_title(
-            f"metrics vs {c}"
-            + (" (band: min-max over the other parameters)" if sampling == "grid" and len(param_cols) > 1 else "")
+            f"metrics vs {lc.split(' [')[0]}"
+            + (" (bars: min-max over the other parameters)" if sampling == "grid" and len(param_cols) > 1 else "")
         )
         save(fig, f"lines_{_label(c).split(' [')[0]}.png")
     return files
