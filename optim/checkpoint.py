@@ -36,7 +36,7 @@ def unflatten(template, arrays):
 def history_columns(problem):
     """The columns of ``history.csv`` and of the history records (units in the names)."""
     return (
-        ["iteration", "objective_deg", "rms_error_deg", "cost_deg"]
+        ["iteration", "objective_deg", "objective_without_cost_deg", "cost_deg"]
         + [f"grad_{n}_deg_per_SI" for n in problem.names]
         + [f"{n}_SI" for n in problem.names]
         + ["projected_gradient", "step", "halvings", "evaluations", "regime", "leading_multiplier", "seconds"]

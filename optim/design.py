@@ -148,8 +148,8 @@ class DesignProblem(AbstractProblem):
     ``offset``, ``rod_inertia`` and ``driver.*`` (derived or fixing the sample grid).
     The base must be a [`jaxcrank.SliderCrank`][jaxcrank.physics.presets.SliderCrank].
 
-    In [`optim.optimize.optimize`][]'s history, ``rms_error_deg`` is the objective
-    minus the cost term: the weighted sum of all `TERMS`, not Eq. 19 alone.
+    In [`optim.optimize.optimize`][]'s history, ``objective_without_cost_deg`` is the
+    objective minus the cost term: the weighted sum of all `TERMS`, not Eq. 19 alone.
     """
 
     stroke: float = 0.240

@@ -278,7 +278,7 @@ def optimize(
         rec = {
             "iteration": len(history),
             "objective_deg": float(value) * f0,
-            "rms_error_deg": float(value) * f0 - cost,
+            "objective_without_cost_deg": float(value) * f0 - cost,
             "cost_deg": cost,
             **{f"grad_{n}_deg_per_SI": float(g) for n, g in zip(problem.names, grad_si)},
             **{f"{n}_SI": float(v) for n, v in zip(problem.names, np.asarray(x))},
