@@ -350,6 +350,8 @@ def run(args) -> int:
     (out / "optimize.toml").write_text(
         tomli_w.dumps(_drop_none(resolved(problem, settings, cfg.get("problem", "paper"))))
     )
+    if not args.quiet:  # the first evaluation compiles (and settles from rest): minutes before the first bar
+        print(f"optimize: {problem.description}: evaluating the start (compiling on a first run)", file=sys.stderr)
     tic = time.perf_counter()
     if settings.starts > 1:
         res = multistart(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
