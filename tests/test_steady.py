@@ -569,6 +569,7 @@ def test_cli_steady_on_the_four_bar(tmp_path):
     assert cli.main([*args, "--samples-per-revolution", "360"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["mechanism"] == "four-bar" and summary["regime"] == "periodic" and summary["period_revolutions"] == 1
+    assert summary["regime_within_revolutions"] == 8  # the settle; no statistics run when periodic
     mods = summary["floquet_multipliers"]
     assert mods == sorted(mods, reverse=True) and 0.0 < mods[0] < 1.0
     assert summary["metrics"][ROCKER] > 0.0 and "peak_contact_force_D_N" in summary["metrics"]

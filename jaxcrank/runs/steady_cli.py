@@ -121,6 +121,14 @@ def summary(steady, wall: float, args) -> dict:
     return {
         "mechanism": steady.mechanism.linkage().name,
         "regime": steady.regime,
+        "regime_within_revolutions": steady.revolutions["settle"] + steady.revolutions["statistics"],
+        "regime_note": (
+            f"period found after {steady.revolutions['settle']} revolution(s) from rest"
+            if steady.regime == "periodic"
+            else f"no period up to {args.max_period} revolution(s) within "
+            f"{steady.revolutions['settle'] + steady.revolutions['statistics']} revolutions from rest: a design "
+            "that settles later is periodic all the same (try more --settle-revolutions)"
+        ),
         "period_revolutions": steady.period_revolutions,
         "floquet_multipliers": [float(v) for v in np.abs(mult)],
         "floquet_multipliers_complex": [[float(v.real), float(v.imag)] for v in mult],
@@ -198,6 +206,7 @@ def run(args) -> int:
     print(
         f"  {steady.regime}"
         + (f", period {steady.period_revolutions} revolution(s)" if steady.period_revolutions else "")
+        + ("" if steady.periodic else f" within {data['regime_within_revolutions']} revolutions from rest")
         + f"; |Floquet multipliers| {mods}; Lyapunov exponent {data['lyapunov_exponent_per_s']:.3g} 1/s; "
         f"{wall:.1f} s"
     )
