@@ -165,7 +165,29 @@ class Ideal(AbstractJointLaw):
     ideal: ClassVar[bool] = True
 
 
-class Clearance(AbstractJointLaw):
+class AbstractPinInHole(AbstractJointLaw):
+    """A revolute joint law of a pin (journal) in a larger hole (bearing), whose state is
+    its approach-speed memory's: the radial clearance and the state's names and scales,
+    shared by the dry [`Clearance`][jaxcrank.physics.joints.Clearance] and the
+    lubricated joint. Subclasses have the fields ``hole_radius`` and ``pin_radius`` (m) first,
+    and a field ``memory`` (an [`AbstractMemoryLaw`][jaxcrank.physics.memory.AbstractMemoryLaw])."""
+
+    hole_radius: eqx.AbstractVar[float]
+    pin_radius: eqx.AbstractVar[float]
+
+    @property
+    def clearance(self):
+        """Radial clearance c = R_h - R_p, m."""
+        return self.hole_radius - self.pin_radius
+
+    def state_names(self):
+        return self.memory.state_names
+
+    def state_scales(self, speed_scale):
+        return self.memory.state_scales(speed_scale)
+
+
+class Clearance(AbstractPinInHole):
     """A dry revolute clearance joint: a pin (journal) of radius ``pin_radius`` in a
     hole (bearing) of radius ``hole_radius`` (model.md, paper Eq. 1-13).
 
@@ -210,17 +232,6 @@ class Clearance(AbstractJointLaw):
             )
         if not isinstance(self.memory, AbstractMemoryLaw):
             raise ParameterError(f"memory {self.memory!r} is not a jaxcrank.physics.memory.AbstractMemoryLaw")
-
-    @property
-    def clearance(self):
-        """Radial clearance c = R_h - R_p, m."""
-        return self.hole_radius - self.pin_radius
-
-    def state_names(self):
-        return self.memory.state_names
-
-    def state_scales(self, speed_scale):
-        return self.memory.state_scales(speed_scale)
 
     def forces(self, kin, state):
         return clearance_contact(self, kin, state)

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .joints import AbstractJointLaw, Clearance, JointForces, JointKinematics, clearance_contact, register_joint_law
+from .joints import AbstractPinInHole, Clearance, JointForces, JointKinematics, clearance_contact, register_joint_law
 from .memory import AbstractMemoryLaw, FrozenMemory
 from .params import Contact, Friction, Material, ParameterError, _concrete, check_range
 from .safemath import cross, perp, safe_norm, smoothstep
@@ -208,7 +208,7 @@ def film_weight(eccentricity_ratio: Scalar, film_start: Scalar, film_end: Scalar
     return 1.0 - smoothstep((eccentricity_ratio - film_start) / (film_end - film_start))
 
 
-class Lubricated(AbstractJointLaw):
+class Lubricated(AbstractPinInHole):
     """A lubricated revolute clearance joint: an oil film of viscosity ``viscosity`` in a
     bearing of length ``length``, and the dry contact of
     [`Clearance`][jaxcrank.physics.joints.Clearance] when the film breaks down (model.md, "Lubricated
@@ -291,17 +291,6 @@ class Lubricated(AbstractJointLaw):
             pin_material=self.pin_material,
             hole_material=self.hole_material,
         )
-
-    @property
-    def clearance(self):
-        """Radial clearance c = R_h - R_p, m."""
-        return self.hole_radius - self.pin_radius
-
-    def state_names(self):
-        return self.memory.state_names
-
-    def state_scales(self, speed_scale):
-        return self.memory.state_scales(speed_scale)
 
     def forces(self, kin, state):
         return lubricated_contact(self, kin, state)
