@@ -70,6 +70,14 @@ def test_forward_mode_equals_reverse_mode(reverse_gradient):
 def test_gradient_matches_central_differences(reverse_gradient, i):
     h = 1e-6 if i < 2 else 1e-8
     e = jnp.zeros(4).at[i].set(h)
-    fd = (rms_slider_deviation_mm(P0 + e) - rms_slider_deviation_mm(P0 - e)) / (2 * h)
+    f_plus, f_minus = rms_slider_deviation_mm(P0 + e), rms_slider_deviation_mm(P0 - e)
+    fd = (f_plus - f_minus) / (2 * h)
     g = float(reverse_gradient[i])
-    assert abs(g - float(fd)) <= 1e-4 * max(abs(float(fd)), 1e-6 * np.abs(np.asarray(reverse_gradient)).max())
+    # the difference quotient's own rounding: each value is the end of a solve of about 500
+    # steps whose rounding adds up like a random walk, so two runs differ by about
+    # sqrt(2 x 500) ~ 32 ulp; three times that is the floor. Measured: 17 ulp between the
+    # two runs at clearance_C, whose pin does not touch within the window (its exact
+    # derivative is zero), where a step of c_C moves the state's length scale
+    rounding = 100 * np.finfo(float).eps * max(abs(float(f_plus)), abs(float(f_minus))) / (2 * h)
+    tol = 1e-4 * max(abs(float(fd)), 1e-6 * np.abs(np.asarray(reverse_gradient)).max()) + rounding
+    assert abs(g - float(fd)) <= tol

@@ -12,14 +12,16 @@ import pytest
 from jaxcrank.physics import laws, presets
 from jaxcrank.physics.guide import CORNERS, GuideClearance, corner_stiffness
 from jaxcrank.physics.joints import Ideal, JointAccelerations, JointKinematics
-from jaxcrank.physics.memory import FrozenMemory
+from jaxcrank.physics.memory import ForgettingMemory, FrozenMemory
 from jaxcrank.physics.params import Contact, Friction, Material, ParameterError
 
 STEEL = 2.0 * (1.0 - 0.3**2) / 207e9  # s1 + s2, 1/Pa
 
 
 def _law(**kw):
-    base = dict(length=0.040, height=0.026, clearance=2.5e-4, corner_radius=1e-3)
+    """The guide of these tests: one approach-speed memory entry per corner (the frozen
+    memory law), so a corner's state is its memory; the default law is checked apart."""
+    base = dict(length=0.040, height=0.026, clearance=2.5e-4, corner_radius=1e-3, memory=FrozenMemory())
     base.update(kw)
     return GuideClearance(**base)
 
@@ -326,6 +328,27 @@ def test_state_layout():
     assert law.state_names() == tuple(f"{c}.approach_memory" for c in CORNERS)
     assert law.state_scales(2.0) == (2.0,) * 4
     np.testing.assert_array_equal(law.initial_state(), np.zeros(4))
+    # the default memory law (the forgetting one) gives each corner a memory and a dwell clock
+    default = GuideClearance(length=0.040, height=0.026, clearance=2.5e-4)
+    assert default.memory == ForgettingMemory()
+    entries = ("approach_memory", "contact_dwell")
+    assert default.state_names() == tuple(f"{c}.{e}" for c in CORNERS for e in entries)
+    assert [float(s) for s in default.state_scales(2.0)] == [2.0, ForgettingMemory().t_dwell] * 4
+
+
+@pytest.mark.parametrize("where", ["touching", "in contact, no slip"])
+def test_default_memory_law_gradients_are_finite(where):
+    """The default guide (forgetting memory: a memory and a dwell clock per corner), with
+    a corner in contact long enough for its gate to be open."""
+    law = GuideClearance(length=0.040, height=0.026, clearance=2.5e-4, corner_radius=1e-3)
+    rate = (0.0, 0.01) if where != "touching" else (0.0, 0.0)
+    motion = Motion(local=(0.0, law.clearance + (1e-5 if where != "touching" else 0.0)), tilt=0.0, local_rate=rate)
+    state = jnp.tile(jnp.array([0.05, 2.0 * law.memory.t_dwell]), 4)
+    g_state = jax.grad(lambda s: _scalar(law, motion.kin(), s, motion.acc()))(state)
+    g_kin = jax.grad(lambda k: _scalar(law, k, state, motion.acc()))(motion.kin())
+    for leaf in jax.tree.leaves((g_state, g_kin)):
+        assert bool(jnp.all(jnp.isfinite(leaf)))
+    assert float(jnp.abs(g_state[::2]).sum()) > 0.0  # the memories set the damping of the corner in contact
 
 
 # --------------------------------------------------------------------------- validation

@@ -233,4 +233,7 @@ def test_memory_laws_by_name_and_state_declaration():
     np.testing.assert_array_equal(np.asarray(joint.initial_state()), [0.0, 0.0])
     scales = [float(s) for s in joint.state_scales(0.25)]
     assert scales == [0.25, 3e-3]
-    assert Clearance(hole_radius=8e-3, pin_radius=7.5e-3).state_names() == ("approach_memory",)
+    # the default memory law is the forgetting one (model.md); the frozen one is chosen by name
+    assert Clearance(hole_radius=8e-3, pin_radius=7.5e-3).memory == memory.ForgettingMemory()
+    frozen = Clearance(hole_radius=8e-3, pin_radius=7.5e-3, memory=memory.FrozenMemory())
+    assert frozen.state_names() == ("approach_memory",)

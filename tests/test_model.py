@@ -22,8 +22,10 @@ def test_state_layout_follows_the_clearance_joints(paper, ideal_names):
     names = tree.cut
     assert names == tuple(n for n in "BC" if n not in ideal_names)
     k = len(names)
-    assert state.n_dof(mech) == 2 * k and state.state_size(mech) == 4 * k + k + 2
-    assert model.law_state_names(mech) == tuple(f"{j}.approach_memory" for j in names)
+    # per clearance joint: two coordinates, two rates, the default (forgetting) memory's
+    # approach-speed memory and dwell clock; then the two works
+    assert state.n_dof(mech) == 2 * k and state.state_size(mech) == 4 * k + 2 * k + 2
+    assert model.law_state_names(mech) == tuple(f"{j}.{e}" for j in names for e in ("approach_memory", "contact_dwell"))
     y = jnp.arange(1.0, state.state_size(mech) + 1.0)
     s = state.unpack(mech, y)
     phys = y * state.state_scales(mech)
@@ -56,7 +58,7 @@ def test_state_from_eccentricities_inverts_eccentricities(paper):
     t = 0.0123
     d = jnp.array([[1e-4, -5e-5], [-3e-5, 8e-5]])
     d_rate = jnp.array([[1e-2, 3e-3], [-2e-3, 5e-3]])
-    rest = jnp.array([0.1, 0.2, 3.0, 0.5])
+    rest = jnp.array([0.1, 1e-3, 0.2, 2e-3, 3.0, 0.5])  # memory, dwell (s) at B, at C; works
     y = kinematics.state_from_eccentricities(paper, t, d, d_rate, rest)
     d2, d2_rate = kinematics.joint_eccentricities(paper, t, y)
     np.testing.assert_allclose(d2, d, rtol=0, atol=1e-15)
@@ -64,7 +66,7 @@ def test_state_from_eccentricities_inverts_eccentricities(paper):
     np.testing.assert_allclose(model.auxiliary(paper, y), rest, rtol=1e-15)
     # one clearance joint holds the two coordinates of a slider-crank with B ideal
     only_c = with_ideal(paper, "B")
-    y = kinematics.state_from_eccentricities(only_c, t, d[1:], d_rate[1:], rest[1:])
+    y = kinematics.state_from_eccentricities(only_c, t, d[1:], d_rate[1:], rest[2:])
     d2, d2_rate = kinematics.joint_eccentricities(only_c, t, y)
     np.testing.assert_allclose(d2, d[1:], rtol=0, atol=1e-15)
     np.testing.assert_allclose(d2_rate, d_rate[1:], rtol=0, atol=1e-12)

@@ -4,10 +4,11 @@ JAX path's settle, and steady_state's classification of the same designs; a four
 both engines.
 
 The designs: CMA-ES's best of the nine-variable design problem
-(bench/results/steady_gradient.json, ``cma_best``) is periodic (period 1, multipliers
-below 1e-3: its section settles within a few revolutions); the design below
-(``CHAOTIC_SI``, one of the design head-to-head's starts that steady_state called not
-periodic) keeps its section points O(1) apart (scaled units) for 20 revolutions."""
+(bench/results/steady_gradient.json, ``cma_best``) is periodic (period 1: its section
+settles within a few revolutions); the design below (``CHAOTIC_SI``, the scrambled Sobol
+point 9 of seed 1 of bench/steady_from_rest.py, not periodic there) keeps its last
+section point O(1) from the earlier ones (scaled units) after 8, 20 and 40 revolutions
+(measured, kernel: 1.8, 1.4 and 2.6; XLA after 8: 1.8)."""
 
 import json
 from pathlib import Path
@@ -20,12 +21,21 @@ import jaxcrank as jc
 from jaxcrank.numerics import shooting
 from jaxcrank.physics import model
 from jaxcrank.runs import regimes
-from optim.presets import NOT_PERIODIC_SI
 
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = ["rod_mass", "clearance_B"]
 
-CHAOTIC_SI = list(NOT_PERIODIC_SI)
+CHAOTIC_SI = [
+    0.4158353626728058,
+    0.9153809262523709,
+    0.0004894240312278271,
+    0.0003019675347954035,
+    2.1942555252462626,
+    0.11227750438265502,
+    1.4723818730562925,
+    0.0386046856828034,
+    192407793626.18924,
+]
 
 kernel_only = pytest.mark.skipif(not regimes.resolve_engine(None) == "kernel", reason="no C compiler")
 
@@ -134,15 +144,17 @@ def test_kernel_and_xla_classify_alike(periodic, chaotic):
 
 @kernel_only
 def test_failing_and_invalid_designs_do_not_disturb_the_others(periodic):
-    """A tiny clearance at B needs about 1.5 x the steps: with a budget between the two,
-    it gets max_steps, and the nominal design's row is the one it has alone."""
-    x = _x(periodic)
+    """Half ``periodic``'s rod mass needs about 1.4 x the steps of the nominal design (5 % heavier
+    than ``periodic``'s, periodic after 3 settle revolutions): with a budget between the
+    two, it gets max_steps, and the nominal design's row is the one it has alone."""
+    x = [1.05 * _x(periodic)[0], _x(periodic)[1]]
+    light = [0.5 * _x(periodic)[0], x[1]]
     opts = dict(settle_revolutions=3, max_period=2, progress=False)
     alone = regimes.classify(periodic, NAMES, [x], **opts)
-    tight = regimes.classify(periodic, NAMES, [[x[0], 1e-9]], **opts)
-    assert tight["steps"][0] > 1.4 * alone["steps"][0]
-    options = shooting.STEADY_DEFAULTS.replace(max_steps=int(1.25 * alone["steps"][0]))
-    t = regimes.classify(periodic, NAMES, [[x[0], 1e-9], x, [-1.0, x[1]]], options=options, **opts)
+    more = regimes.classify(periodic, NAMES, [light], **opts)
+    assert more["steps"][0] > 1.3 * alone["steps"][0]
+    options = shooting.STEADY_DEFAULTS.replace(max_steps=int(1.2 * alone["steps"][0]))
+    t = regimes.classify(periodic, NAMES, [light, x, [-1.0, x[1]]], options=options, **opts)
     assert t["status"].tolist() == ["max_steps", "ok", "invalid"]
     assert "max_steps" in t["message"][0] and "rod_mass" in t["message"][2]
     assert t["regime"].tolist() == ["", "periodic", ""] and np.isnan(t["period_revolutions"][[0, 2]]).all()
@@ -199,7 +211,11 @@ def test_cli_writes_table_summary_and_regime_map(periodic, tmp_path):
     x = _x(periodic)
     spec = {
         "sampling": "grid",
-        "parameters": {"rod_mass": {"values": [x[0], 1.1 * x[0]]}, "clearance_B": {"values": [x[1], 1.2 * x[1]]}},
+        # four designs that are periodic after 3 settle revolutions at rtol 1e-9
+        "parameters": {
+            "rod_mass": {"values": [1.02 * x[0], 1.05 * x[0]]},
+            "clearance_B": {"values": [0.95 * x[1], x[1]]},
+        },
         "simulation": {"rtol": 1e-9, "revolutions": 4},
         "mechanism": jc.config.to_dict(periodic),
     }

@@ -41,7 +41,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .joints import AbstractJointLaw, JointForces, JointKinematics, register_joint_law
 from .laws import AbstractContactLaw, CorrectedDamping, effective_compliance
-from .memory import AbstractMemoryLaw, FrozenMemory, MemoryInput
+from .memory import AbstractMemoryLaw, ForgettingMemory, MemoryInput
 from .params import Contact, Friction, Material, ParameterError, _concrete, check_range
 from .safemath import cross, perp, positive_power
 
@@ -150,7 +150,7 @@ class GuideClearance(AbstractJointLaw):
     corner_radius: float = 1e-3
     contact: Contact = Contact(law=CorrectedDamping())
     friction: Friction = Friction()
-    memory: AbstractMemoryLaw = FrozenMemory()
+    memory: AbstractMemoryLaw = ForgettingMemory()
     slider_material: Material = Material()
     guide_material: Material = Material()
 

@@ -31,7 +31,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .laws import effective_compliance
-from .memory import AbstractMemoryLaw, FrozenMemory, MemoryInput, memory_target, memory_target_rate
+from .memory import AbstractMemoryLaw, ForgettingMemory, MemoryInput, memory_target, memory_target_rate
 from .params import Contact, Friction, Material, ParameterError, _concrete, check_range
 from .safemath import perp, safe_norm
 
@@ -216,7 +216,7 @@ class Clearance(AbstractPinInHole):
     pin_radius: float
     contact: Contact = Contact()
     friction: Friction = Friction()
-    memory: AbstractMemoryLaw = FrozenMemory()
+    memory: AbstractMemoryLaw = ForgettingMemory()
     pin_material: Material = Material()
     hole_material: Material = Material()
 

@@ -37,7 +37,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .joints import AbstractPinInHole, Clearance, JointForces, JointKinematics, clearance_contact, register_joint_law
-from .memory import AbstractMemoryLaw, FrozenMemory
+from .memory import AbstractMemoryLaw, ForgettingMemory
 from .params import Contact, Friction, Material, ParameterError, _concrete, check_range
 from .safemath import cross, perp, safe_norm, smoothstep
 
@@ -260,7 +260,7 @@ class Lubricated(AbstractPinInHole):
     length: float
     contact: Contact = Contact()
     friction: Friction = Friction()
-    memory: AbstractMemoryLaw = FrozenMemory()
+    memory: AbstractMemoryLaw = ForgettingMemory()
     pin_material: Material = Material()
     hole_material: Material = Material()
     film_start: float = 0.95
