@@ -287,13 +287,14 @@ def batch_means(values: np.ndarray, batch: int, rms: bool) -> dict:
 
 def not_periodic(mech, z, options, statistics_revolutions, batch_revolutions, samples, counts):
     """Finite-time multipliers at z, Lyapunov exponent and long-run statistics.
-    Returns (jac, result, lyapunov 1/s, statistics, last revolution's Simulation, z_end)."""
+    Returns (jac, result, lyapunov 1/s, statistics, sections): ``sections`` the dynamic
+    entries (scaled) at z and after each revolution, shape (statistics_revolutions + 1, m)."""
     _, jac, result = map_and_jacobian(mech, z, 1, options)
     counts["shooting"] += 1
     if result != diffrax.RESULTS.successful:
         return jac, failure(result), None, None, None
     v = jnp.ones_like(z) / math.sqrt(z.shape[0])
-    logs, per_rev = [], []
+    logs, per_rev, sections = [], [], [z]
     for _ in range(statistics_revolutions):
         z, v, metrics_, result = revolution_with_tangent(mech, z, v, options, samples)
         counts["statistics"] += 1
@@ -302,8 +303,9 @@ def not_periodic(mech, z, options, statistics_revolutions, batch_revolutions, sa
             return jac, failure(result), None, None, None
         logs.append(math.log(norm))
         v = v / norm
+        sections.append(z)
         per_rev.append({k: float(val) for k, val in metrics_.items() if k != "window_start_s"})
     lyapunov = float(np.mean(logs)) / float(mech.period)
     rms = set(signals.rms_metrics(mech))
     statistics = {key: batch_means([r[key] for r in per_rev], batch_revolutions, key in rms) for key in per_rev[0]}
-    return jac, RESULTS.successful, lyapunov, statistics, z
+    return jac, RESULTS.successful, lyapunov, statistics, jnp.stack(sections)

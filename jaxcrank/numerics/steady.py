@@ -18,45 +18,25 @@ revolution is a map ``Phi: y(nT) -> y((n + 1) T)`` of the scaled state
    circle), ``not periodic`` otherwise. Not periodic, it measures the largest
    finite-time Lyapunov exponent from the growth of a tangent vector (renormalised each
    revolution) and the long-run statistics of the metrics (batch means over
-   revolutions, 95 % confidence intervals) over ``statistics_revolutions``.
+   revolutions, 95 % confidence intervals) over ``statistics_revolutions``;
+5. **checks the statistics run**: when that run's own section points recur (step 2's
+   test), the motion settled late, and the solver shoots from its end (step 3). An
+   attracting orbit found there makes the result ``periodic``; "not periodic" thus means
+   not periodic within ``settle_revolutions + statistics_revolutions`` revolutions.
 
-**Neutral directions.** Two kinds of state entries are left out of the Newton and
-Floquet problem, so that ``I - M`` is invertible on what is left:
-
-- the driver and dissipated work: accumulated energy flows that never feed back;
-  every section state has them at zero (the orbit's works are then the energy per
-  period);
-- an approach-speed memory that is *idle*: while a pin stays in contact the memory
-  holds the approach speed of the last impact, frozen (its row of M is a unit row, its
-  multiplier exactly 1). The orbit is then one of a family parametrised by that value,
-  and the solver holds it at the value the settle reached (the value the motion from
-  rest selects). A memory that moves over a revolution (the pin separates and hits
-  again) is an ordinary dynamic entry and is solved for.
-
-The Newton and Floquet problem lives on the **dynamic subspace**: the coordinates s
-and rates s' of [`jaxcrank.physics.model.State`][jaxcrank.physics.state.State], plus the memories that are not
-idle (``SteadyState.active``).
+**Neutral directions.** The driver and dissipated work (energy flows that never feed
+back; zero at every section state) and, with the frozen memory law only, an *idle*
+approach-speed memory (a pin in contact all period: its multiplier is exactly 1, and the
+solver holds it at the value the settle reached) are left out of the Newton and Floquet
+problem. What is left is the **dynamic subspace** (``SteadyState.active``).
 
 **Exact gradient.** [`orbit_start`][jaxcrank.numerics.steady.orbit_start] returns the section state y*(mech) with a
 ``jax.custom_jvp`` (implicit function theorem at the fixed point):
-``dy*/dp = (I - M)^-1 dPhi^k/dp`` on the dynamic subspace (idle memories and works
-held), so ``jax.jvp`` / ``jax.jacfwd`` of any function of the steady state are exact.
-Forward mode only (the tangent of Phi goes through ``diffrax.ForwardMode``): design
-problems have few variables. [`steady_value_and_grad`][jaxcrank.numerics.steady.steady_value_and_grad] wraps it for a
-functional of one period of the orbit. The building blocks (maps, Newton, batch means) live in
-[`jaxcrank.numerics.shooting`][].
-
-Example:
-
-```python
-steady = jaxcrank.steady_state(mech)            # settle, shoot, classify
-steady.regime, steady.multiplier_moduli         # "periodic", |mu| largest first
-steady.metrics["rms_transmission_angle_error_deg"]
-value, grad = steady_value_and_grad(
-    lambda sim: sim.metrics["rms_transmission_angle_error_deg"], build, params, steady
-)
-nxt = jaxcrank.steady_state(build(params2), warm_start=steady)   # a few revolutions
-```
+``dy*/dp = (I - M)^-1 dPhi^k/dp`` on the dynamic subspace, so ``jax.jvp`` / ``jax.jacfwd``
+of any function of the steady state are exact (forward mode only).
+[`steady_value_and_grad`][jaxcrank.numerics.steady.steady_value_and_grad] wraps it for a functional of one period of
+the orbit. The building blocks (maps, Newton, batch means) live in [`jaxcrank.numerics.shooting`][];
+the user's guide, with examples, is the docs' steady-state page.
 """
 
 from __future__ import annotations
@@ -93,7 +73,7 @@ class SteadyState(eqx.Module):
         regime: ``"periodic"`` or ``"not periodic"``.
         period_revolutions: k, the period in crank revolutions (0 when not periodic).
         residual: ``max |Phi^k(y*) - y*|`` over the dynamic subspace, scaled units (the
-            recurrence distance of the last section points when not periodic).
+            recurrence distance of the settle's last section points when not periodic).
         newton_iterations: Newton steps taken.
         section_state: y*, the scaled state at t = 0 (crank at its initial angle) that
             starts the orbit; works zero. Not periodic: the last section point.
@@ -117,8 +97,8 @@ class SteadyState(eqx.Module):
             the statistics revolutions (units in the names); ``None`` when periodic.
         revolutions: solve counts in revolutions: ``settle``, ``shooting`` (with
             tangents), ``orbit``, ``statistics`` (with a tangent).
-        options: the solve settings and sampling used (the same for samples_per_revolution).
-        samples_per_revolution: the solve settings and sampling used (the same for options).
+        options: the solve settings used.
+        samples_per_revolution: sample times per revolution of the orbit and of its RMS metrics.
     """
 
     mechanism: Mechanism
@@ -312,30 +292,12 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         candidates = [min(distances, key=distances.get)]
     failure = None
     for k in candidates:
-        say(f"shooting for a period-{k} orbit (Newton, at most {max_newton} iterations of {k} revolution(s))")
-        z, jac, active, res, its, result = shooting.shoot(mech, z_end, k, None, options, newton_tol, max_newton)
-        counts["shooting"] += k * (its + 1)
-        if result != RESULTS.successful:
-            failure = failure or (result, res, its)
-            continue
-        mult = shooting.multipliers(jac, active)
-        if np.max(np.abs(mult), initial=0.0) >= 1.0:
-            break  # an unstable orbit: the motion does not settle onto it
-        say(f"periodic (residual {float(res):.2g} after {its} Newton iteration(s)): solving the orbit's metrics")
-        orbit = period_solve(mech, shooting.full(z), k, options=options, samples_per_revolution=samples)
-        counts["orbit"] += k
-        if not orbit.ok:
-            return SteadyState(result=shooting.failure(orbit.result), regime="not periodic", residual=res, **empty)
-        lead = float(np.max(np.abs(mult), initial=0.0))
-        fields = dict(empty, period_revolutions=k, newton_iterations=its, orbit=orbit, monodromy=jac, active=active)
-        fields.update(
-            metrics={key: v for key, v in orbit.metrics.items() if key != "window_start_s"},
-            floquet_multipliers=jnp.asarray(mult),
-            neutral=_neutral_names(mech, active),
-            section_state=shooting.full(z),
-            lyapunov_exponent_per_s=jnp.asarray(math.log(max(lead, 1e-300)) / (k * float(mech.period))),
-        )
-        return SteadyState(result=RESULTS.successful, regime="periodic", residual=res, **fields)
+        found = _shoot(mech, z_end, k, newton_tol, max_newton, samples, options, counts, say, empty)
+        if isinstance(found, SteadyState) or found == "unstable":
+            if found == "unstable":
+                break  # an unstable orbit: the motion does not settle onto it
+            return found
+        failure = failure or found
     else:
         if failure is not None and not near:
             if warm_k:  # the warm start was too far: settle from there and start over
@@ -346,11 +308,21 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
             return SteadyState(result=result, regime="not periodic", residual=res, **dict(empty, newton_iterations=its))
     recurrence = float(jnp.max(jnp.abs(z_end - section[-2, :m])))
     say(f"no period up to {max_period} revolution(s): Lyapunov exponent and statistics over {n_stats} revolutions")
-    jac, result, lyapunov, statistics, z_last = shooting.not_periodic(
+    jac, result, lyapunov, statistics, sections = shooting.not_periodic(
         mech, z_end, options, n_stats, batch, samples, counts
     )
     if result != RESULTS.successful:
         return SteadyState(result=result, regime="not periodic", residual=jnp.asarray(recurrence), **empty)
+    z_last = sections[-1]
+    # a late settler: the statistics run's own section points recur, so shoot from its end
+    late = shooting.recurrence(sections, m, max_period, recurrence_tol)[1].tolist()
+    for k in [k for k, d in enumerate(late, start=1) if d <= recurrence_tol]:
+        say(f"the statistics run settled: its section points recur with period {k}")
+        found = _shoot(mech, z_last, k, newton_tol, max_newton, samples, options, counts, say, empty)
+        if isinstance(found, SteadyState):
+            return found
+        if found == "unstable":
+            break
     active = ~shooting.idle(jac) | (np.arange(m) < 2 * model.n_dof(mech))
     orbit = period_solve(mech, shooting.full(z_last), 1, options=options, samples_per_revolution=samples)
     counts["orbit"] += 1
@@ -362,6 +334,36 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         lyapunov_exponent_per_s=jnp.asarray(lyapunov),
     )
     return SteadyState(result=RESULTS.successful, regime="not periodic", residual=jnp.asarray(recurrence), **fields)
+
+
+def _shoot(mech, z, k, newton_tol, max_newton, samples, options, counts, say, empty):
+    """Shoot for a period-``k`` orbit from the dynamic entries ``z``: a periodic
+    [`SteadyState`][jaxcrank.numerics.steady.SteadyState] (or a failed one where its
+    orbit's solve failed), ``"unstable"`` for an orbit with a multiplier on or outside the
+    unit circle, or ``(result, residual, iterations)`` where Newton failed."""
+    say(f"shooting for a period-{k} orbit (Newton, at most {max_newton} iterations of {k} revolution(s))")
+    z, jac, active, res, its, result = shooting.shoot(mech, z, k, None, options, newton_tol, max_newton)
+    counts["shooting"] += k * (its + 1)
+    if result != RESULTS.successful:
+        return (result, res, its)
+    mult = shooting.multipliers(jac, active)
+    lead = float(np.max(np.abs(mult), initial=0.0))
+    if lead >= 1.0:
+        return "unstable"
+    say(f"periodic (residual {float(res):.2g} after {its} Newton iteration(s)): solving the orbit's metrics")
+    orbit = period_solve(mech, shooting.full(z), k, options=options, samples_per_revolution=samples)
+    counts["orbit"] += k
+    if not orbit.ok:
+        return SteadyState(result=shooting.failure(orbit.result), regime="not periodic", residual=res, **empty)
+    fields = dict(empty, period_revolutions=k, newton_iterations=its, orbit=orbit, monodromy=jac, active=active)
+    fields.update(
+        metrics={key: v for key, v in orbit.metrics.items() if key != "window_start_s"},
+        floquet_multipliers=jnp.asarray(mult),
+        neutral=_neutral_names(mech, active),
+        section_state=shooting.full(z),
+        lyapunov_exponent_per_s=jnp.asarray(math.log(max(lead, 1e-300)) / (k * float(mech.period))),
+    )
+    return SteadyState(result=RESULTS.successful, regime="periodic", residual=res, **fields)
 
 
 @eqx.filter_custom_jvp
