@@ -17,7 +17,7 @@ import jaxcrank as jc
 from jaxcrank import sweep
 from jaxcrank.numerics import solve as solve_module
 from jaxcrank.numerics.kernel import build, engine, gpu, source
-from jaxcrank.physics import laws, model
+from jaxcrank.physics import catalogue, laws, model, presets
 
 pytestmark = pytest.mark.skipif(not engine.available(), reason="no C compiler")
 
@@ -73,14 +73,16 @@ def assert_field_equal(structures, n=2000, preset=jc.paper, per_entry=False):
         # one (vmap) and the one-state one (lax.map, the program of a sweep's single
         # design); they associate sums differently, and cancellation in the equations of
         # motion lifts that to ~1e-10 relative at some of these states. The kernel must
-        # equal one of them to 1e-12, component by component.
+        # equal one of them to 1e-12, component by component, or lie between them.
         field = lambda t, y, m=mech: model.vector_field(t, y, m)  # noqa: E731
         batched = np.asarray(jax.vmap(field)(ts, ys))
         single = np.asarray(jax.lax.map(lambda a, f=field: f(a[0], a[1:]), np.c_[ts, ys]))
         label = f"{mech.name}: {contact_law.__name__}, {friction_law.__name__}, clearance at {layout or 'neither'}"
         assert np.all(np.isfinite(batched)), label
         scale = np.max(np.abs(batched), axis=0) if per_entry else np.abs(batched)
-        bad = (np.abs(out - batched) > 1e-12 * scale) & (np.abs(out - single) > 1e-12 * scale)
+        # (a kernel value between XLA's two is inside XLA's own rounding spread: also equal)
+        between = (np.minimum(batched, single) <= out) & (out <= np.maximum(batched, single))
+        bad = (np.abs(out - batched) > 1e-12 * scale) & (np.abs(out - single) > 1e-12 * scale) & ~between
         assert not bad.any(), (label, np.argwhere(bad)[:5], out[bad][:5], batched[bad][:5], single[bad][:5])
         lanes = np.zeros_like(ys)  # the same code on vectors of four designs: the same bits
         lib.lib.jk_field_batch_v(n, params, ts, ys, lanes)
@@ -107,6 +109,15 @@ def test_generated_field_equals_the_model_on_the_four_bar():
     relative to themselves (1.05e-12 and 3.6e-11), the rounding the paper's slow
     whole-product test records too."""
     assert_field_equal(COVERING[:3], preset=jc.four_bar, per_entry=True)
+
+
+def test_generated_field_equals_the_model_with_lubricated_pins_and_a_guide_with_play():
+    """The same (per entry, as on the four-bar) where B and C are lubricated (the paper's
+    slider-crank and the four-bar) and where the slider has play in its guide: measured,
+    the largest difference relative to itself is 5e-12, in the driver-work rate of the
+    lubricated slider-crank (a sum of the joints' powers), at a state deep in contact."""
+    for preset in (catalogue.paper_lubricated, catalogue.four_bar_lubricated, presets.paper_guide):
+        assert_field_equal(COVERING[:1], n=1000, preset=preset, per_entry=True)
 
 
 @pytest.mark.slow

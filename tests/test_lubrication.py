@@ -53,7 +53,7 @@ def line_of_centres(eps, phi, eps_dot, phi_dot):
     return eps * CLEARANCE * n, CLEARANCE * (eps_dot * n + eps * phi_dot * t), n, t
 
 
-STATE = jnp.array([0.2])  # approach-speed memory, m/s
+STATE = jnp.array([0.2, 1e-3])  # the default memory law's: approach-speed memory, m/s; dwell clock, s
 
 
 @pytest.mark.parametrize("eps", [0.05, 0.3, 0.5, 0.8, 0.94])
@@ -288,7 +288,7 @@ def test_gradients_are_finite_at_the_centre_and_across_the_hand_over(eps, moving
 
 def test_state_is_the_dry_laws_memory():
     joint, dry = law(), Clearance(hole_radius=PIN_RADIUS + CLEARANCE, pin_radius=PIN_RADIUS)
-    assert joint.state_names() == dry.state_names() == ("approach_memory",)
+    assert joint.state_names() == dry.state_names() == ("approach_memory", "contact_dwell")
     assert joint.state_scales(2.0) == dry.state_scales(2.0)
     assert float(joint.clearance) == pytest.approx(CLEARANCE, rel=1e-12)
     d, v, _, _ = line_of_centres(0.99, 0.4, 30.0, 5.0)
@@ -320,3 +320,22 @@ def test_lubricated_is_registered_by_name():
 def test_bad_settings_name_the_parameter_and_its_range(kw, match):
     with pytest.raises(ParameterError, match=match):
         law(**kw)
+
+
+def test_paper_lubricated_without_oil_is_the_dry_paper_run():
+    """The ``paper-lubricated`` preset with zero viscosity at B and C runs the dry paper
+    preset's 20 ms exactly (the same states at every sample, the same steps); with its oil
+    the film changes the motion."""
+    import equinox as eqx
+
+    import jaxcrank as jc
+    from jaxcrank.physics import presets
+
+    oiled = presets.preset("paper-lubricated")
+    dry_oil = eqx.tree_at(lambda m: (m.joints["B"].viscosity, m.joints["C"].viscosity), oiled, (0.0, 0.0))
+    dry = jc.simulate(jc.paper(), 0.02, n_samples=201)
+    without = jc.simulate(dry_oil, 0.02, n_samples=201)
+    np.testing.assert_array_equal(np.asarray(without.ys), np.asarray(dry.ys))
+    assert int(without.num_steps) == int(dry.num_steps)
+    with_oil = jc.simulate(oiled, 0.02, n_samples=201)
+    assert with_oil.ok and float(jnp.max(jnp.abs(with_oil.ys[:, :8] - dry.ys[:, :8]))) > 1.0

@@ -7,6 +7,9 @@ preset: ``--mechanism NAME``, [`jaxcrank.physics.presets.preset`][]):
   with play at all three revolute joints;
 - ``four-bar-ABCD`` ([`four_bar_four_pins`][jaxcrank.physics.catalogue.four_bar_four_pins]): the
   four-bar with play at all four joints;
+- ``paper-lubricated`` ([`paper_lubricated`][jaxcrank.physics.catalogue.paper_lubricated]) and
+  ``four-bar-lubricated`` ([`four_bar_lubricated`][jaxcrank.physics.catalogue.four_bar_lubricated]):
+  the paper's slider-crank and the four-bar with oil in the bearings of B and C;
 - ``flores`` ([`flores`][jaxcrank.physics.catalogue.flores]): Flores and Ambrósio's high-speed
   slider-crank with a clearance joint at the slider pin, the benchmark of the
   clearance-joint literature.
@@ -20,6 +23,7 @@ from __future__ import annotations
 from .joints import Clearance, Ideal
 from .laws import Ambrosio, LankaraniNikravesh
 from .linkage import ConstantSpeed
+from .lubrication import Lubricated
 from .params import Contact, Friction, Material
 from .presets import RPM, FourBar, SliderCrank, with_clearance
 
@@ -43,6 +47,39 @@ def four_bar_four_pins() -> FourBar:
     """The four-bar of [`jaxcrank.physics.presets.four_bar`][] with 0.5 mm radial clearance
     (8 / 7.5 mm pins) at all four joints: the ground pivots A and D as well as B and C."""
     return with_clearance(FourBar(name="four-bar-ABCD"), A=5e-4, D=5e-4)
+
+
+#: the oil of the lubricated presets: dynamic viscosity, Pa s, and bearing length, m
+OIL_VISCOSITY = 0.4
+BEARING_LENGTH = 8e-3
+
+
+def _oiled(dry: Clearance) -> Lubricated:
+    """The lubricated joint with ``dry``'s radii, laws and materials, ``OIL_VISCOSITY`` and
+    ``BEARING_LENGTH``."""
+    fields = ("hole_radius", "pin_radius", "contact", "friction", "memory", "pin_material", "hole_material")
+    return Lubricated(viscosity=OIL_VISCOSITY, length=BEARING_LENGTH, **{f: getattr(dry, f) for f in fields})
+
+
+def paper_lubricated() -> SliderCrank:
+    """The paper's slider-crank ([`jaxcrank.physics.presets.paper`][]) with lubricated pins at B
+    and C ([`Lubricated`][jaxcrank.physics.lubrication.Lubricated]): the same 8 / 7.5 mm radii,
+    dry contact and friction laws (which take over at high eccentricity), plus an oil film
+    of viscosity 0.4 Pa s (400 cP, the value of the lubricated slider-crank studies of
+    Flores, Ambrósio, Claro and Lankarani, as recalled, not checked against the papers: an
+    SAE 40 oil near 40 C) over a bearing length of 8 mm (L / D = 0.5, where the
+    short-bearing solution holds; the paper gives no bearing length)."""
+    base = SliderCrank()
+    joints = {**base.joints, "B": _oiled(base.joints["B"]), "C": _oiled(base.joints["C"])}
+    return SliderCrank(joints=joints, name="slider-crank-lubricated")
+
+
+def four_bar_lubricated() -> FourBar:
+    """The four-bar of [`jaxcrank.physics.presets.four_bar`][] with lubricated pins at B and C:
+    the oil and bearing length of [`paper_lubricated`][jaxcrank.physics.catalogue.paper_lubricated]."""
+    base = FourBar()
+    joints = {**base.joints, "B": _oiled(base.joints["B"]), "C": _oiled(base.joints["C"])}
+    return FourBar(joints=joints, name="four-bar-lubricated")
 
 
 def flores() -> SliderCrank:
@@ -121,4 +158,11 @@ def flores() -> SliderCrank:
     )
 
 
-__all__ = ["flores", "four_bar_four_pins", "slider_crank_ground_pivot", "slider_crank_three_pins"]
+__all__ = [
+    "flores",
+    "four_bar_four_pins",
+    "four_bar_lubricated",
+    "paper_lubricated",
+    "slider_crank_ground_pivot",
+    "slider_crank_three_pins",
+]

@@ -379,6 +379,8 @@ PRESETS: dict[str, Callable[[], AbstractMechanism]] = {
     "slider-crank-ABC": _catalogue("slider_crank_three_pins"),
     "four-bar": four_bar,
     "four-bar-ABCD": _catalogue("four_bar_four_pins"),
+    "paper-lubricated": _catalogue("paper_lubricated"),
+    "four-bar-lubricated": _catalogue("four_bar_lubricated"),
     "flores": _catalogue("flores"),
 }
 
