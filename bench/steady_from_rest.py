@@ -25,14 +25,24 @@ revolutions from the centre design's settled state (its run from rest; pins carr
 :func:`jaxcrank.numerics.steady.carry_state`): the orbit the gradient follows. A run
 farther than ``--left-tol`` scaled units has left that orbit.
 
-Writes ``bench/results/steady_from_rest.json`` after every design (a rerun resumes: the
-screening and the finished designs are kept). Usage:
-``python bench/steady_from_rest.py --designs 8 --sobol 128 --seed 0``.
+With ``--random``, the candidates are the Sobol points alone and the first ``--designs``
+periodic ones are evaluated in the order they were drawn, idle memory or not (nothing is
+screened for passing); each evaluated design is also re-solved from its own orbit with
+every approach-speed memory halved and doubled (``unique_orbit``: the largest section
+difference over the dynamic entries, scaled units, and Eq. 19's relative change).
+
+Writes ``--out`` (default ``bench/results/steady_from_rest.json``) after every design (a
+rerun resumes: the screening and the finished designs are kept), with the memory law of
+the joints. Usage:
+``python bench/steady_from_rest.py --designs 8 --sobol 128 --seed 0``;
+``python bench/steady_from_rest.py --random --designs 10 --sobol 32 --seed 1
+--out bench/results/steady_from_rest_random.json``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -45,21 +55,66 @@ from steady_gradient import designs as gradient_designs
 
 import jaxcrank as jc
 from jaxcrank.numerics.steady import carry_state, steady_value_and_grad
+from jaxcrank.physics import model
 from jaxcrank.runs.regimes import classify
 from optim.design import design_problem
 
 KEY = "rms_transmission_angle_error_deg"
 ROOT = Path(__file__).resolve().parent
 WORKS = {"driver_work", "dissipated_work"}
-JOINTS = 2  # approach-speed memories B and C: the last entries before the works
 TOL = {"rtol": 1e-10, "atol": 1e-10, "max_steps": 10_000_000}
 
 
-def candidates(prob, n_sobol, seed):
-    """(source, unit design) pairs, duplicates removed."""
+def law_entries(mech):
+    """Indices (into the state) of the joint laws' entries, and of the approach-speed memories."""
+    names = model.law_state_names(mech)
+    start = 2 * model.n_dof(mech)
+    law = np.arange(start, start + len(names))
+    return law, np.array([start + i for i, n in enumerate(names) if n.endswith("approach_memory")])
+
+
+def unique_orbit(mech, steady):
+    """Re-solve ``mech``'s steady state from its own orbit with every approach-speed memory
+    scaled by 0.5 and by 2: the largest section difference over the dynamic entries (scaled)
+    and Eq. 19's relative change, per factor."""
+    _, memories = law_entries(mech)
+    active = np.asarray(steady.active)
+    y = np.asarray(steady.section_state)
+    k = int(steady.period_revolutions)
+    samples = steady.samples_per_revolution
+    # the orbit's k section points: a warm start may land on any of them (the same orbit)
+    phases = [np.asarray(steady.orbit.ys[j * samples]) for j in range(k)]
+    out = {}
+    for factor in (0.5, 2.0):
+        y0 = y.copy()
+        y0[memories] *= factor
+        again = jc.steady_state(mech, warm_start=jnp.asarray(y0), throw=False)
+        same_regime = again.regime == steady.regime and int(again.period_revolutions) == int(steady.period_revolutions)
+        end = np.asarray(again.section_state)
+        distance = min(float(np.max(np.abs(end - p)[: active.size][active])) for p in phases)
+        v0, v1 = float(steady.metrics[KEY]), float(again.metrics[KEY])
+        out[str(factor)] = {
+            "regime": again.regime,
+            "period_revolutions": int(again.period_revolutions),
+            "section_difference_scaled": distance if same_regime else None,
+            "eq19_relative_change": abs(v1 - v0) / abs(v0) if same_regime else None,
+        }
+    out["same_orbit"] = all(
+        e["section_difference_scaled"] is not None
+        and e["section_difference_scaled"] <= 1e-6
+        and e["eq19_relative_change"] <= 1e-8
+        for e in (out["0.5"], out["2.0"])
+    )
+    return out
+
+
+def candidates(prob, n_sobol, seed, sobol_only=False):
+    """(source, unit design) pairs, duplicates removed; ``sobol_only``: the Sobol points alone."""
     lo, hi = np.array(prob.lower), np.array(prob.upper)
     out = [(f"steady_gradient:{name}", (np.asarray(x) - lo) / (hi - lo)) for name, x in gradient_designs().items()]
     study = json.loads((ROOT / "results" / "design.json").read_text())
+    if sobol_only:
+        out, study = [], {"problems": []}
     for problem in study["problems"]:
         if problem["n_variables"] != 9:
             continue
@@ -81,9 +136,10 @@ def candidates(prob, n_sobol, seed):
     return unique
 
 
-def screen(prob, build, cands, rows):
-    """Regime by ``classify`` (kernel), then ``steady_state`` on the periodic designs.
-    ``rows``: screened rows already done (kept)."""
+def screen(prob, build, cands, rows, limit=None):
+    """Regime by ``classify`` (kernel), then ``steady_state`` on the periodic designs (in
+    order, until ``limit`` of them are periodic by ``steady_state``; the rest keep the
+    classification alone). ``rows``: screened rows already done (kept)."""
     done = {r["source"] for r in rows}
     todo = [(s, u) for s, u in cands if s not in done]
     if not todo:
@@ -101,7 +157,8 @@ def screen(prob, build, cands, rows):
             "classify_status": str(status),
             "classify_regime": str(regime),
         }
-        if regime == "periodic":
+        enough = limit is not None and sum(r.get("regime") == "periodic" for r in rows) >= limit
+        if regime == "periodic" and not enough:
             steady = jc.steady_state(build(jnp.asarray(u)), throw=False)
             row.update(
                 regime=steady.regime,
@@ -161,15 +218,17 @@ def evaluate(build, row, h, args):
             u[i] += sign * h
             mech = build(jnp.asarray(u))
             y_rest, v = from_rest(mech, args.revolutions, k)
-            y_cont = continued_section(centre, y_centre, mech, args.cont)
+            # a whole number of periods, so that a period-k orbit is compared in its own phase
+            y_cont = continued_section(centre, y_centre, mech, k * -(-args.cont // k))
             diff = np.abs(y_rest - y_cont)[:m]
             d = float(np.max(diff[active]))
-            memories = float(np.max(diff[-JOINTS:][active[-JOINTS:]], initial=0.0))
+            law = law_entries(mech)[0]
+            memories = float(np.max(diff[law][active[law]], initial=0.0))
             pair.append(
                 {
                     "value_deg": v,
                     "distance_scaled": d,
-                    "distance_coordinates_rates_scaled": float(np.max(diff[:-JOINTS])),
+                    "distance_coordinates_rates_scaled": float(np.max(diff[: law[0]])),
                     "distance_memories_scaled": memories,
                     "left_orbit": d > args.left_tol,
                 }
@@ -204,6 +263,7 @@ def evaluate(build, row, h, args):
             i for i, pair in enumerate(runs) if not any(p["left_orbit"] for p in pair)
         ],
         "meets_requirement": bool(rel <= 0.02 and signs),
+        "unique_orbit": unique_orbit(centre, steady) if args.random else None,
         "wall_s": time.perf_counter() - t0,
     }
 
@@ -219,6 +279,9 @@ def main():
     parser.add_argument("--left-tol", type=float, default=1e-3, help="distance (scaled) of a run that left the orbit")
     parser.add_argument("--max-candidates", type=int, help="screen only the first N candidates (default all)")
     parser.add_argument("--out", type=Path, default=ROOT / "results" / "steady_from_rest.json")
+    parser.add_argument(
+        "--random", action="store_true", help="Sobol points only, periodic ones evaluated in draw order, idle or not"
+    )
     args = parser.parse_args()
     prob = design_problem()
     lo, hi = jnp.asarray(prob.lower), jnp.asarray(prob.upper)
@@ -229,11 +292,14 @@ def main():
     state = {"screened": [], "evaluated": []}
     if args.out.exists():
         state = {k: json.loads(args.out.read_text())[k] for k in state}
-    cands = candidates(prob, args.sobol, args.seed)[: args.max_candidates]
-    state["screened"] = screen(prob, build, cands, state["screened"])
+    cands = candidates(prob, args.sobol, args.seed, sobol_only=args.random)[: args.max_candidates]
+    state["screened"] = screen(prob, build, cands, state["screened"], limit=args.designs if args.random else None)
     _write(args, state)
-    pool = [r for r in state["screened"] if no_idle_memory(r)]
-    pool.sort(key=lambda r: (r["period_revolutions"] != 1, r["multipliers_abs"][0]))
+    if args.random:  # in draw order, nothing screened out but the regime
+        pool = [r for r in state["screened"] if r.get("regime") == "periodic"]
+    else:
+        pool = [r for r in state["screened"] if no_idle_memory(r)]
+        pool.sort(key=lambda r: (r["period_revolutions"] != 1, r["multipliers_abs"][0]))
     print(f"{len(pool)} periodic designs without idle memory", flush=True)
     for row in pool[: args.designs]:
         for h in args.h:
@@ -263,7 +329,15 @@ def _write(args, state):
             str(h): sum(e["runs_off_orbit_above_1e-6"] == 0 for e in ev if e["h_box"] == h) for h in hs
         },
     }
+    base = design_problem().base
+    laws = {j: type(base.joints[j].memory).__name__ for j in base.joints if hasattr(base.joints[j], "memory")}
+    law = base.joints[next(iter(laws))].memory
+    memory_law = {"by_joint": laws, "settings": {f.name: float(getattr(law, f.name)) for f in dataclasses.fields(law)}}
     meta = {"revolutions": args.revolutions, "continued": args.cont, "left_tol_scaled": args.left_tol, **TOL}
+    meta.update(random_draw=args.random, sobol=args.sobol, seed=args.seed, memory_law=memory_law)
+    if args.random:
+        summary["drawn"] = len(state["screened"])
+        summary["unique_orbit"] = sum(bool(e.get("unique_orbit", {}).get("same_orbit")) for e in ev)
     tmp = args.out.with_suffix(".tmp")
     tmp.write_text(json.dumps({**meta, "summary": summary, **state, "machine": machine()}, indent=1))
     tmp.replace(args.out)
