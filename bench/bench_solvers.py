@@ -198,8 +198,8 @@ def main():
     args = p.parse_args()
     mech = jc.paper()
     report = {"machine": machine(), "tolerance": args.tol}
-    print(f"paper run, {args.t1} s, default solver {solve.DEFAULT_SOLVER} ...", flush=True)
-    report["paper_run"] = jax_run(mech, args.t1, solve.DEFAULT_SOLVER, args.tol, int(args.t1 * 36000) + 1)
+    print(f"paper run, {args.t1} s, default solver {solve.DEFAULTS.solver_name} ...", flush=True)
+    report["paper_run"] = jax_run(mech, args.t1, solve.DEFAULTS.solver_name, args.tol, int(args.t1 * 36000) + 1)
     print(json.dumps(report["paper_run"], indent=1), flush=True)
     if args.implicit:
         print(f"paper run, {args.t1} s, {args.implicit} ...", flush=True)
@@ -215,7 +215,7 @@ def main():
         print(f"window {args.window} s: scipy {method} ...", flush=True)
         window.append(scipy_run(mech, args.window, method, args.tol, n))
         print(f"  {window[-1]['wall_s']:.3f} s", flush=True)
-    base = next(r for r in window if r["solver"] == solve.DEFAULT_SOLVER)
+    base = next(r for r in window if r["solver"] == solve.DEFAULTS.solver_name)
     for r in window:
         r["speedup_of_default"] = r["wall_s"] / base["wall_s"]
         r["max_slider_dev_rel_diff_vs_default"] = (

@@ -31,7 +31,7 @@ def narrow_ramp(window, budget):
     mech = _ramp(1e-4, 2e-4)
     rows = []
     for name in ["tsit5", "kvaerno5"]:
-        solver = solve.make_solver(name)
+        solver = solve.solver_from_name(name)
         sol = diffrax.diffeqsolve(
             diffrax.ODETerm(model.vector_field),
             solver,

@@ -106,7 +106,7 @@ def main(argv=None):
         return ts, ys, dt, n, int(sol.stats["num_rejected_steps"]), regimes, in_b, in_c
 
     ts, ys, dt, n, rejected, regimes, in_b, in_c = steps_by_regime(diffrax.Tsit5())
-    *_, n_rodas, rejected_rodas, regimes_rodas, _, _ = steps_by_regime(solve.make_solver("rodas4"))
+    *_, n_rodas, rejected_rodas, regimes_rodas, _, _ = steps_by_regime(solve.solver_from_name("rodas4"))
 
     beta = tsit5_real_stability_limit()
     idx = np.arange(0, len(dt), args.every)

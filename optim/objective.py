@@ -104,11 +104,11 @@ class Pathwise(AbstractObjective):
     pins-centred start, with their exact reverse-mode gradient (module docstring).
 
     Attributes:
-        t_start: evaluation window (t_start, t_end], s (the same for t_end).
-        t_end: evaluation window (t_start, t_end], s (the same for t_start).
+        t_start: start of the evaluation window (t_start, t_end], s, >= 0.
+        t_end: end of the evaluation window, s, > t_start.
         samples_per_degree: samples per degree of crank angle, > 0.
-        rtol: solver tolerances on the scaled state, > 0 (the same for atol).
-        atol: solver tolerances on the scaled state, > 0 (the same for rtol).
+        rtol: relative solver tolerance on the scaled state, > 0.
+        atol: absolute solver tolerance on the scaled state (scaled units), > 0.
         max_steps: step budget of the solve.
         throw: see [`AbstractObjective`][optim.objective.AbstractObjective].
 
@@ -166,10 +166,9 @@ class Ensemble(AbstractObjective):
     second derivatives of it).
 
     Attributes:
-        t_start: evaluation window (t_start, t_end], s. Default: the second
-            and third revolutions at 600 rpm, (0.1, 0.3] s (the same for t_end).
-        t_end: evaluation window (t_start, t_end], s. Default: the second
-            and third revolutions at 600 rpm, (0.1, 0.3] s (the same for t_start).
+        t_start: start of the evaluation window (t_start, t_end], s (default 0.1: the
+            window is the second and third revolutions at 600 rpm).
+        t_end: end of the evaluation window, s (default 0.3).
         samples_per_degree: samples per degree of crank angle, > 0.
         window: length of each ensemble window, s; rounded to whole sample steps and
             shrunk to divide the evaluation window; in (0, t_end - t_start].
@@ -184,8 +183,8 @@ class Ensemble(AbstractObjective):
         window_adjoint: diffrax adjoint of the windows: ``diffrax.ForwardMode()``
             (differentiate with [`value_and_grad`][optim.objective.value_and_grad] / ``jax.jacfwd``) or
             ``diffrax.RecursiveCheckpointAdjoint()`` (``jax.grad``).
-        rtol: solver tolerances on the scaled state, > 0 (the same for atol).
-        atol: solver tolerances on the scaled state, > 0 (the same for rtol).
+        rtol: relative solver tolerance on the scaled state, > 0.
+        atol: absolute solver tolerance on the scaled state (scaled units), > 0.
         max_steps: step budget of the long solve.
         throw: see [`AbstractObjective`][optim.objective.AbstractObjective].
 

@@ -166,9 +166,9 @@ def _checked(problem: AbstractProblem, u, value, grad):
         return value, grad
     x = ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, np.asarray(problem.from_unit(u))))
     raise SimulationError(
-        f"the objective could not be evaluated at {x}: the long solve did not reach t_end within "
-        "Objective.max_steps, or more than half of the ensemble windows failed; raise max_steps or "
-        "window_max_steps, loosen rtol/atol, or shorten Objective.window"
+        f"the objective could not be evaluated at {x}: its solve did not reach t_end within the "
+        "objective's max_steps, or more than half of the ensemble windows failed; raise the objective's "
+        "max_steps or window_max_steps, loosen its rtol/atol, or shorten its window"
     )
 
 

@@ -43,10 +43,10 @@ class AbstractProblem(abc.ABC):
     Attributes:
         base: the mechanism every design starts from (fixed parameters).
         names: design variable names.
-        lower: bounds, SI units of each variable (the same for upper).
-        upper: bounds, SI units of each variable (the same for lower).
-        A: linear inequality constraints ``A x <= b`` (SI), shape (m, n) and (m,) (the same for b).
-        b: linear inequality constraints ``A x <= b`` (SI), shape (m, n) and (m,) (the same for A).
+        lower: lower bounds, SI units of each variable, shape (n,).
+        upper: upper bounds, SI units of each variable, shape (n,).
+        A: matrix of the linear inequality constraints ``A x <= b`` (SI), shape (m, n).
+        b: right-hand side of ``A x <= b`` (SI), shape (m,).
         start: start design, SI (default: the subclass's default start projected onto the set).
         objective: how the mechanism is measured (an [`optim.objective.AbstractObjective`][]).
         cost_weight: weight of the manufacturing-cost term, degrees (0: none).

@@ -64,7 +64,7 @@ def test_configure_after_backend_start_warns_and_leaves_flags():
     assert "XLA_FLAGS" not in environ
 
 
-def _compiled_solve_text(solver=solve.DEFAULT_SOLVER):
+def _compiled_solve_text(solver=solve.DEFAULTS.solver_name):
     mech = jc.paper()
     ts = solve.sample_times(mech, t1=1e-3)
     return jax.jit(lambda m: solve.simulate(m, ts=ts, solver=solver, throw=False).ys).lower(mech).compile().as_text()

@@ -73,11 +73,6 @@ def solver_name(solver: diffrax.AbstractSolver) -> str:
     return type(solver).__name__
 
 
-def make_solver(name: str = "tsit5") -> diffrax.AbstractAdaptiveSolver:
-    """Same as [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (kept for scripts that use this name)."""
-    return solver_from_name(name)
-
-
 @dataclasses.dataclass(frozen=True)
 class SolveOptions:
     """The numerical settings of a solve: the one place their defaults live
@@ -86,10 +81,9 @@ class SolveOptions:
     Attributes:
         solver: a diffrax adaptive solver instance (default ``diffrax.Tsit5()``);
             text names (TOML, CLI) go through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name].
-        rtol: error tolerances on the dimensionless state
-            ([`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales]), > 0 (the same for atol).
-        atol: error tolerances on the dimensionless state
-            ([`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales]), > 0 (the same for rtol).
+        rtol: relative error tolerance on the dimensionless state
+            ([`jaxcrank.physics.model.state_scales`][jaxcrank.physics.state.state_scales]), > 0.
+        atol: absolute error tolerance on the dimensionless state (scaled units), > 0.
         dt0: initial step, s, > 0.
         max_steps: step budget (accepted and rejected steps), >= 1.
 
@@ -140,7 +134,6 @@ class SolveOptions:
 
 
 DEFAULTS = SolveOptions()
-DEFAULT_SOLVER = DEFAULTS.solver_name
 
 
 class SimulationError(RuntimeError):
@@ -300,26 +293,12 @@ def simulate(
             [`jaxcrank.physics.model.initial_state`][jaxcrank.physics.state.initial_state] ,
             pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.
         options: the numerical settings ([`SolveOptions`][jaxcrank.numerics.solve.SolveOptions]).
-        solver: override the field of ``options`` of the
-            same name when given. ``solver`` is a diffrax solver instance; a name
-            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
-            for rtol, atol, dt0, max_steps).
-        rtol: override the field of ``options`` of the
-            same name when given. ``solver`` is a diffrax solver instance; a name
-            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
-            for solver, atol, dt0, max_steps).
-        atol: override the field of ``options`` of the
-            same name when given. ``solver`` is a diffrax solver instance; a name
-            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
-            for solver, rtol, dt0, max_steps).
-        dt0: override the field of ``options`` of the
-            same name when given. ``solver`` is a diffrax solver instance; a name
-            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
-            for solver, rtol, atol, max_steps).
-        max_steps: override the field of ``options`` of the
-            same name when given. ``solver`` is a diffrax solver instance; a name
-            (`SOLVERS`) is still taken, through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name] (the same
-            for solver, rtol, atol, dt0).
+        solver: when given, replaces ``options.solver``: a diffrax solver instance, or a
+            name among `SOLVERS` (through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name]).
+        rtol: when given, replaces ``options.rtol`` (relative tolerance, scaled state, > 0).
+        atol: when given, replaces ``options.atol`` (absolute tolerance, scaled units, > 0).
+        dt0: when given, replaces ``options.dt0`` (initial step, s, > 0).
+        max_steps: when given, replaces ``options.max_steps`` (step budget, >= 1).
         adjoint: diffrax adjoint (default ``RecursiveCheckpointAdjoint``, exact
             reverse-mode gradients of the discrete solve). For ``jax.jacfwd`` /
             ``jax.jvp`` pass ``diffrax.ForwardMode()``: with a few parameters it is

@@ -56,10 +56,8 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
     Attributes:
         solver: the solver that takes the steps (its steps, error estimates and dense
             output are passed through unchanged).
-        first_sample: the first and last of the equally spaced sample
-            times of the RMS metrics, s (the same for last_sample).
-        last_sample: the first and last of the equally spaced sample
-            times of the RMS metrics, s (the same for first_sample).
+        first_sample: the first of the equally spaced sample times of the RMS metrics, s.
+        last_sample: the last of those sample times, s.
         n_samples: number of sample times, >= 2 (static).
         t_start: the metrics cover t > t_start, s.
     """

@@ -111,8 +111,8 @@ class AbstractContactLaw(eqx.Module):
             approach_speed: delta_dot_minus, the normal speed at the onset of the
                 impact, m/s, > 0.
             restitution: c_e in (0, 1].
-            hole_radius: m (the same for pin_radius).
-            pin_radius: m (the same for hole_radius).
+            hole_radius: radius of the hole, m.
+            pin_radius: radius of the pin, m (smaller than the hole's).
             compliance_sum: 1/Pa.
             exponent: n.
 

@@ -98,13 +98,13 @@ def solve_mechanisms(
 
     Args:
         mechs: the designs.
-        t_end: per design, s (the same for t_start).
-        t_start: per design, s (the same for t_end).
+        t_end: end time per design, s.
+        t_start: start of the metrics window per design, s.
         n_samples: RMS sample times per design, >= 2.
-        rtol: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for atol, dt0, max_steps).
-        atol: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for rtol, dt0, max_steps).
-        dt0: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for rtol, atol, max_steps).
-        max_steps: as [`jaxcrank.numerics.solve.SolveOptions`][] (the same for rtol, atol, dt0).
+        rtol: relative tolerance, scaled state, > 0 (as [`jaxcrank.numerics.solve.SolveOptions`][]).
+        atol: absolute tolerance, scaled units, > 0.
+        dt0: initial step, s, > 0.
+        max_steps: step budget per design (accepted and rejected steps), >= 1.
         y0: (n, state) scaled initial states (default pins centred, zeros).
         threads: OpenMP threads (default [`default_threads`][jaxcrank.numerics.kernel.engine.default_threads]).
         vector: solve four designs per thread, one per vector lane (the default; the
@@ -171,7 +171,7 @@ def solve(
     base: Mechanism, names: Sequence[str], xs: np.ndarray, settings, threads: int | None = None, vector: bool = True
 ) -> Batch:
     """Designs ``xs`` (n, len(names)) of ``base`` (SI values of ``names``), simulated as
-    a sweep's [`jaxcrank.runs.sweep.Settings`][jaxcrank.runs.sweep_design.SweepSettings] asks (revolutions, samples,
+    a sweep's [`SweepSettings`][jaxcrank.runs.sweep_design.SweepSettings] ask (revolutions, samples,
     metrics window, tolerances, step budget).
 
     Raises:
