@@ -39,6 +39,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from jaxcrank.numerics.estimators import straight_through
 from jaxcrank.numerics.solve import DEFAULTS
 from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
 from jaxcrank.physics.params import ParameterError
@@ -268,8 +269,7 @@ class Ensemble(AbstractObjective):
     def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
         exact, starts = self.reference(mech)
         surrogate = self.pooled(mech, starts)
-        sg = jax.lax.stop_gradient
-        return {k: exact[k] + (surrogate[k] - sg(surrogate[k])) for k in rms_metrics(mech)}
+        return {k: straight_through(exact[k], surrogate[k]) for k in rms_metrics(mech)}
 
     def forward_mode(self) -> bool:
         return isinstance(self.window_adjoint, diffrax.ForwardMode)

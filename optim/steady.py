@@ -36,6 +36,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from jaxcrank.numerics import steady as S
+from jaxcrank.numerics.estimators import straight_through
 from jaxcrank.numerics.shooting import STEADY_DEFAULTS, period_solve
 from jaxcrank.numerics.solve import SolveOptions
 from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
@@ -143,10 +144,9 @@ class Steady(AbstractObjective):
         values = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in names}
         if self.trend is None:
             return values
-        sg = jax.lax.stop_gradient
-        _, starts = self.trend.reference(sg(mech))
+        _, starts = self.trend.reference(jax.lax.stop_gradient(mech))
         surrogate = self.trend.pooled(mech, starts)
-        return {k: values[k] + (surrogate[k] - sg(surrogate[k])) for k in names}
+        return {k: straight_through(values[k], surrogate[k]) for k in names}
 
     def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
         """The RMS metrics of a concrete ``mech`` ([`solve`][optim.steady.Steady.solve] then
