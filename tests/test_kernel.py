@@ -156,6 +156,25 @@ def test_free_flight_metrics_equal_the_jax_path_per_design():
         np.testing.assert_allclose(got.metrics[:, j], ref[key], rtol=1e-9, atol=1e-300, err_msg=key)
 
 
+def test_a_viscosity_sweep_of_the_lubricated_preset_equals_the_jax_path_per_design():
+    """A sweep over the oil's viscosity at B and C of ``paper-lubricated`` (0, the dry
+    joint, to 1 Pa s) on the kernel: over the first 1 ms (the pins squeeze the film on
+    their way out of the centre; no contact yet) every design takes the JAX path's steps
+    and its metrics equal the JAX path's to 1e-9 relative, and the film changes them."""
+    names = ["joints.B.viscosity", "joints.C.viscosity"]
+    designs = np.array([[0.0, 0.0], [0.4, 0.4], [1.0, 0.1]])
+    settings = sweep.Settings(revolutions=0.01, samples_per_revolution=3600, metrics_from_revolution=0.0)
+    base = catalogue.paper_lubricated()
+    ref = sweep.run(base, names, designs, settings, chunk=1, progress=False, engine="xla")
+    got = engine.solve(base, names, designs, settings)
+    assert np.all(got.status == 0) and list(ref["status"]) == ["ok"] * len(designs)
+    np.testing.assert_array_equal(got.steps, ref["steps"])
+    for j, key in enumerate(sweep.metric_names(base)):
+        np.testing.assert_allclose(got.metrics[:, j], ref[key], rtol=1e-9, atol=1e-300, err_msg=key)
+    moved = ref["max_abs_slider_x_deviation_m"]
+    assert moved[1] != moved[0] and moved[2] != moved[0]
+
+
 def test_metrics_through_the_first_impacts_agree_within_the_solve_error():
     """Over 2 ms (through the first impacts at B and C: windows short enough to precede
     chaos), each metric's largest relative difference between the kernel and the JAX
