@@ -101,7 +101,12 @@ def add_arguments(p):
         "Optimise a design problem (default: the paper's L1, L2 problem) with gradients "
         "through the simulation; writes history, figures and result.json into --out."
     )
-    p.add_argument("--config", type=Path, help="TOML settings (see optim/cli.py); default: the paper problem")
+    p.add_argument(
+        "--config",
+        type=Path,
+        help="TOML settings, described on the docs' page 'Optimiser config files' (docs/optimiser-config.md); "
+        "default: the paper problem",
+    )
     p.add_argument("--out", type=Path, default=Path("runs/optimize"), help="run directory (default runs/optimize)")
     p.add_argument(
         "--resume", action="store_true", help="continue the run in --out from its last checkpoint (--out must exist)"

@@ -152,3 +152,19 @@ def test_the_site_builds_strict_so_every_cross_reference_resolves(tmp_path):
         env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
     )
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+
+
+def test_the_optimiser_config_page_example_builds_its_problem():
+    """The complete example of docs/optimiser-config.md is a valid config: ``jaxcrank
+    optimize`` builds the problem and settings it describes."""
+    import tomllib
+
+    from optim import cli
+
+    text = (ROOT / "docs" / "optimiser-config.md").read_text()
+    cfg = tomllib.loads(re.search(r"```toml\n(.*?)```", text, re.S).group(1))
+    problem, settings = cli.build(cfg)
+    assert type(problem).__name__ == "DesignProblem" and len(problem.names) == 9
+    assert type(settings.optimizer).__name__ == "ProjectedLBFGS" and settings.starts == 4
+    assert settings.max_iterations == 40 and settings.max_seconds == 1800
+    assert type(problem.objective).__name__ == "Steady"
