@@ -27,37 +27,9 @@ The optimiser's compiled programs are kept in a cache folder ([`jaxcrank.runs.ca
 ``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
 loads them instead of tracing and compiling again.
 
-Config TOML (every key optional):
-
-```toml
-problem = "paper"            # or "tolerance", "robust", "design" (optim/design.py),
-                             # "four-bar" (optim/four_bar.py)
-[optimizer]                  # method (optim.optimizers.OPTIMIZERS) and its settings,
-method = "adam"              # then optim.optimize.Settings fields
-learning_rate = 0.1          # adam; lbfgs takes penalty, max_linesearch_steps; projected_lbfgs
-                             # takes memory_size, max_linesearch_steps, initial_step, ftol
-max_iterations = 30
-starts = 1                   # > 1: the best of several starts (Sobol points, seed)
-[objective]                  # method: "ensemble", "pathwise" or "steady_state"
-method = "ensemble"          # (optim.objective), then the fields of that class;
-t_end = 0.3                  # window_gradient = "forward"/"reverse" picks the adjoint
-[design]                     # override the problem's variables
-names = ["crank_length", "rod_length"]
-lower = [0.110, 0.390]
-upper = [0.130, 0.410]
-start = [0.120, 0.400]
-A = [[1.0, -1.0]]
-b = [-0.05]
-cost_weight = 0.0
-scatter = [["crank_length", 5e-5, "normal"], ["clearance_C", 5e-5, "uniform"]]  # robust problem
-samples = 8                  # manufactured parts averaged (0: nominal design only)
-seed = 0
-stroke = 0.240               # design problem: target stroke, m; also stroke_tolerance,
-weights = [["rms_contact_force_N", 2e-5]]  # min_transmission_deg and term weights
-min_transmission_deg = 40.0  # four-bar problem: transmission within [40, 140] deg; scale_links
-[mechanism]                  # base mechanism, as in `jaxcrank simulate`'s config.toml
-                             # (mechanism = "slider-crank", "four-bar", ...)
-```
+The config file (TOML, every key optional: ``problem``, ``[optimizer]``, ``[objective]``,
+``[design]``, ``[mechanism]``) is described, with an example, on the docs page "Optimiser
+config files" (docs/optimiser-config.md); a test builds that example.
 
 ``final_mechanism`` in result.json is the final design's mechanism in the format of
 [`jaxcrank.runs.config.to_dict`][] (its ``mechanism`` key names the kind), which
