@@ -55,10 +55,8 @@ BEARING_LENGTH = 8e-3
 
 
 def _oiled(dry: Clearance) -> Lubricated:
-    """The lubricated joint with ``dry``'s radii, laws and materials, ``OIL_VISCOSITY`` and
-    ``BEARING_LENGTH``."""
-    fields = ("hole_radius", "pin_radius", "contact", "friction", "memory", "pin_material", "hole_material")
-    return Lubricated(viscosity=OIL_VISCOSITY, length=BEARING_LENGTH, **{f: getattr(dry, f) for f in fields})
+    """``dry`` with ``OIL_VISCOSITY`` in a bearing of ``BEARING_LENGTH``."""
+    return Lubricated.oiled(dry, OIL_VISCOSITY, BEARING_LENGTH)
 
 
 def paper_lubricated() -> SliderCrank:

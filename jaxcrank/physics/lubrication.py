@@ -208,6 +208,10 @@ def film_weight(eccentricity_ratio: Scalar, film_start: Scalar, film_end: Scalar
     return 1.0 - smoothstep((eccentricity_ratio - film_start) / (film_end - film_start))
 
 
+#: the fields a lubricated joint shares with its dry clearance joint
+_DRY_FIELDS = ("hole_radius", "pin_radius", "contact", "friction", "memory", "pin_material", "hole_material")
+
+
 class Lubricated(AbstractPinInHole):
     """A lubricated revolute clearance joint: an oil film of viscosity ``viscosity`` in a
     bearing of length ``length``, and the dry contact of
@@ -282,15 +286,14 @@ class Lubricated(AbstractPinInHole):
     @property
     def dry(self) -> Clearance:
         """The dry clearance joint with the same radii, laws and materials."""
-        return Clearance(
-            hole_radius=self.hole_radius,
-            pin_radius=self.pin_radius,
-            contact=self.contact,
-            friction=self.friction,
-            memory=self.memory,
-            pin_material=self.pin_material,
-            hole_material=self.hole_material,
-        )
+        return Clearance(**{f: getattr(self, f) for f in _DRY_FIELDS})
+
+    @classmethod
+    def oiled(cls, dry: Clearance, viscosity: float, length: float) -> Lubricated:
+        """The lubricated joint with ``dry``'s radii, laws and materials, an oil of
+        ``viscosity`` (Pa s) and a bearing ``length`` (m); its [`dry`][jaxcrank.physics.lubrication.Lubricated.dry]
+        is ``dry`` again."""
+        return cls(viscosity=viscosity, length=length, **{f: getattr(dry, f) for f in _DRY_FIELDS})
 
     def forces(self, kin, state):
         return lubricated_contact(self, kin, state)
