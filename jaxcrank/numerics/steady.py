@@ -293,10 +293,10 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
     failure = None
     for k in candidates:
         found = _shoot(mech, z_end, k, newton_tol, max_newton, samples, options, counts, say, empty)
-        if isinstance(found, SteadyState) or found == "unstable":
-            if found == "unstable":
-                break  # an unstable orbit: the motion does not settle onto it
+        if isinstance(found, SteadyState):
             return found
+        if found == "unstable":
+            break  # an unstable orbit: the motion does not settle onto it
         failure = failure or found
     else:
         if failure is not None and not near:
