@@ -41,6 +41,18 @@ def last_revolution(cols, mech):
     return t >= T_END - float(mech.period) - 1e-12
 
 
+def save(fig, axes, path):
+    """Label the shared crank-angle axis, grid every panel and write ``fig`` to ``path``."""
+    import matplotlib.pyplot as plt
+
+    axes[-1].set_xlabel("crank angle, deg (last revolution of the 0.4 s run)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def lubricated(figure):
     import matplotlib.pyplot as plt
 
@@ -67,13 +79,8 @@ def lubricated(figure):
     axes[0].set_ylabel("normal force at B, kN")
     axes[1].set_ylabel("normal force at C, kN")
     axes[2].set_ylabel("slider acceleration\ndeviation, m/s^2")
-    axes[2].set_xlabel("crank angle, deg (last revolution of the 0.4 s run)")
     axes[0].legend(loc="upper right")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(figure, dpi=120)
-    plt.close(fig)
+    save(fig, axes, figure)
     keys = [k for k in out["paper"]["metrics"] if k.startswith(("peak_contact_force", "max_abs_slider_ax", "rms_"))]
     out["relative_change"] = {
         k: (out["paper-lubricated"]["metrics"][k] - out["paper"]["metrics"][k]) / abs(out["paper"]["metrics"][k])
@@ -106,13 +113,8 @@ def guide(figure):
     axes[1].axhline(1e3 * limit, color="k", ls=":", lw=0.8, label="2 c / L")
     axes[1].axhline(-1e3 * limit, color="k", ls=":", lw=0.8)
     axes[1].set_ylabel("tilt, mrad")
-    axes[1].set_xlabel("crank angle, deg (last revolution of the 0.4 s run)")
     axes[1].legend(loc="upper right")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(figure, dpi=120)
-    plt.close(fig)
+    save(fig, axes, figure)
     return {
         "metrics": metrics,
         "steps": steps,

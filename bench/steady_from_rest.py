@@ -285,6 +285,7 @@ def main():
     args = parser.parse_args()
     prob = design_problem()
     lo, hi = jnp.asarray(prob.lower), jnp.asarray(prob.upper)
+    args.memory_law = memory_law(prob.base)
 
     def build(u):
         return prob.mechanism(lo + u * (hi - lo))
@@ -316,6 +317,13 @@ def main():
     _write(args, state)
 
 
+def memory_law(base):
+    """The memory law of ``base``'s joints: its class by joint and its settings (SI)."""
+    laws = {j: type(base.joints[j].memory).__name__ for j in base.joints if hasattr(base.joints[j], "memory")}
+    law = base.joints[next(iter(laws))].memory
+    return {"by_joint": laws, "settings": {f.name: float(getattr(law, f.name)) for f in dataclasses.fields(law)}}
+
+
 def _write(args, state):
     ev = state["evaluated"]
     hs = sorted({e["h_box"] for e in ev})
@@ -329,12 +337,8 @@ def _write(args, state):
             str(h): sum(e["runs_off_orbit_above_1e-6"] == 0 for e in ev if e["h_box"] == h) for h in hs
         },
     }
-    base = design_problem().base
-    laws = {j: type(base.joints[j].memory).__name__ for j in base.joints if hasattr(base.joints[j], "memory")}
-    law = base.joints[next(iter(laws))].memory
-    memory_law = {"by_joint": laws, "settings": {f.name: float(getattr(law, f.name)) for f in dataclasses.fields(law)}}
     meta = {"revolutions": args.revolutions, "continued": args.cont, "left_tol_scaled": args.left_tol, **TOL}
-    meta.update(random_draw=args.random, sobol=args.sobol, seed=args.seed, memory_law=memory_law)
+    meta.update(random_draw=args.random, sobol=args.sobol, seed=args.seed, memory_law=args.memory_law)
     if args.random:
         summary["drawn"] = len(state["screened"])
         summary["unique_orbit"] = sum(bool(e.get("unique_orbit", {}).get("same_orbit")) for e in ev)
