@@ -8,7 +8,8 @@ also get ``grid.csv`` and ``landscape.png``: the objective on an N x N vmap grid
 the box with the optimiser's path; it costs N^2 solves (docs/optimisation.md times
 it). With ``--starts N`` (N > 1) each start runs in ``start_NNN/`` (its own checkpoint
 and history) and ``multistart.json`` lists the starts; the top-level files describe
-the best run ([`optim.optimize.multistart`][]).
+the best run ([`optim.starts.multistart`][]). With one start and the steady-state
+objective, the run first finds a periodic start ([`optim.starts.periodic_start`][]).
 
 ``result.json`` holds: the problem and method; ``converged`` (true when a stopping
 test was met) and ``stop_reason`` (the test, or why the run stopped without meeting one: the
@@ -21,7 +22,9 @@ the final design's mechanism, SI, as in ``config.toml``); ``simulate_command`` (
 command that simulates the final design: ``jaxcrank simulate --design
 DIR/result.json``); ``starts`` (how many starts ran) and, for ``--starts N > 1``,
 ``start_runs`` (each start's result) and ``best_start`` (the index of the best);
-``grid`` (with ``--grid N``) and, for slider-crank problems, ``paper`` (the paper's numbers).
+``start_search`` (the classified candidate starts, steady-state objective with one start),
+``seconds_this_call`` (wall time by phase, s); ``grid`` (with ``--grid N``) and, for slider-crank
+problems, ``paper`` (the paper's numbers).
 
 The optimiser's compiled programs are kept in a cache folder ([`jaxcrank.runs.cache`][];
 ``--cache-dir``, ``--no-cache``), so a second run with the same problem and settings
@@ -47,19 +50,22 @@ from pathlib import Path
 
 import tomli_w
 
-from jaxcrank import cache, reference
+from jaxcrank import cache
 from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
 
 from .objective import AbstractObjective, Ensemble, Pathwise
-from .optimize import Settings, multistart, optimize
+from .optimize import Settings, optimize
 from .optimizers import OPTIMIZERS, from_settings
-from .presets import PROBLEMS
+from .presets import PROBLEMS, paper_reference
 from .problem import AbstractProblem as Problem
+from .starts import multistart, periodic_start
+from .steady import RegimeGuard, Steady
 
-PAPER_OPTIMUM_DEG = reference.value("optimisation", "optimum_deg")
+#: the default ``[optimizer]`` settings with the steady-state objective (chosen by the design
+#: head-to-head over a family of problems, docs/design-studies.md)
+STEADY_OPTIMIZER = {"method": "adam", "learning_rate": 0.05}
 GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
-PAPER_REDUCTION_PCT = reference.value("optimisation", "reduction_percent")
 
 
 def add_parser(sub):
@@ -84,7 +90,11 @@ def add_arguments(p):
         "--resume", action="store_true", help="continue the run in --out from its last checkpoint (--out must exist)"
     )
     p.add_argument("--problem", choices=sorted(PROBLEMS), help="problem preset (overrides the config's)")
-    p.add_argument("--method", choices=sorted(OPTIMIZERS), help="optimiser (default adam)")
+    p.add_argument(
+        "--method",
+        choices=sorted(OPTIMIZERS),
+        help="optimiser (default adam: learning rate 0.1, or 0.05 with the steady-state objective)",
+    )
     p.add_argument("--iterations", type=int, help="max iterations (default 30)")
     p.add_argument(
         "--starts",
@@ -183,7 +193,12 @@ def build(cfg) -> tuple[Problem, Settings]:
             for k, v in design.items()
         }
         problem = dataclasses.replace(problem, **design)
-    return problem, settings_from_config(cfg.get("optimizer", {}))
+    section = dict(cfg.get("optimizer", {}))
+    if not isinstance(problem.objective, Steady):
+        return problem, settings_from_config(section)
+    # steps kept inside the periodic regime, where the gradient is exact
+    section = section if "method" in section else {**STEADY_OPTIMIZER, **section}
+    return problem, dataclasses.replace(settings_from_config(section), guard=RegimeGuard())
 
 
 def objective_from_config(section: dict) -> AbstractObjective:
@@ -324,16 +339,23 @@ def run(args) -> int:
             raise ParameterError(
                 f"{out} already holds a run ({held}): pass --resume to continue it or choose another --out"
             )
+    tic, found = time.perf_counter(), None
+    if settings.starts == 1 and isinstance(problem.objective, Steady) and not args.resume:
+        # the steady-state gradient is zero outside the periodic regime: start from a periodic design
+        if not args.quiet:
+            print(f"optimize: {problem.description}: classifying starts (compiling on a first run)", file=sys.stderr)
+        found = periodic_start(problem, seed=settings.seed, progress=not args.quiet)
+        problem = found.problem  # optimize.toml records the chosen start: --resume continues from it
     (out / "optimize.toml").write_text(
         tomli_w.dumps(_drop_none(resolved(problem, settings, cfg.get("problem", "paper"))))
     )
-    if not args.quiet:  # the first evaluation compiles (and settles from rest): minutes before the first bar
+    if not args.quiet and found is None:  # the first evaluation compiles (and settles from rest)
         print(f"optimize: {problem.description}: evaluating the start (compiling on a first run)", file=sys.stderr)
-    tic = time.perf_counter()
     if settings.starts > 1:
         res = multistart(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
     else:
-        res = optimize(problem, settings, out=out, resume=args.resume, progress=not args.quiet)
+        evaluator = found.evaluator if found is not None else None
+        res = optimize(problem, settings, out=out, resume=args.resume, progress=not args.quiet, evaluator=evaluator)
     wall = time.perf_counter() - tic
     hist = res["history"]
     plots.plot_history(hist, out / "history.png", title=problem.description, best=res["final_objective"])
@@ -376,11 +398,16 @@ def run(args) -> int:
         "reduction_percent": 100.0 * (f_start - res["final_objective"]) / f_start,
         **_final_mechanism(problem, res["final"], out),
         "wall_seconds_this_call": wall,
+        "seconds_this_call": {
+            **({"classifying_starts": found.seconds} if found is not None else {}),
+            **{f"{k}_optimizer": v for k, v in res.get("seconds", {}).items()},
+        },
+        **({"start_search": found.describe()} if found is not None else {}),
         "starts": settings.starts,
         **({"start_runs": res["runs"], "best_start": res["best_start"]} if "runs" in res else {}),
         **({"grid": grid_info} if grid_info else {}),
         "final_regime": _regime(problem, res["final"]) if args.regime else None,
-        **({"paper": _paper()} if cfg.get("problem", "paper") in ("paper", "robust") else {}),
+        **({"paper": paper_reference()} if cfg.get("problem", "paper") in ("paper", "robust") else {}),
     }
     (out / "result.json").write_text(json.dumps(result, indent=2))
     print(
@@ -392,21 +419,6 @@ def run(args) -> int:
     print(f"{'converged' if result['converged'] else 'not converged'}: {res['stop_reason']}")
     print(f"simulate the final design: {result['simulate_command']}")
     return 0
-
-
-def _paper() -> dict:
-    """result.json's ``paper`` entry (slider-crank problems): the paper's numbers and why ours differ."""
-    return {
-        "optimum_deg": PAPER_OPTIMUM_DEG,
-        "reduction_percent": PAPER_REDUCTION_PCT,
-        "why_ours_differs": (
-            "The paper's ADAMS model is not fully specified (offset e, restitution, friction, "
-            "materials, contact smoothing, evaluation window and sample count are not given; "
-            "model.md lists our readings) and its start design L1 = 150 mm lies outside its own "
-            "box. Our start is the box centre and our window (t_start, t_end]; the objective "
-            "itself is Eq. 19 in degrees."
-        ),
-    }
 
 
 def _final_mechanism(problem: Problem, final, out: Path) -> dict:

@@ -211,7 +211,11 @@ class DesignProblem(AbstractProblem):
 
     @property
     def description(self) -> str:
-        return self.title
+        """``title``, or else the number of variables, the stroke and the transmission-angle floor."""
+        return self.title or (
+            f"design: {self.n} variables, stroke {self.stroke * 1e3:g} mm, "
+            f"transmission >= {self.min_transmission_deg:g} deg"
+        )
 
     # ------------------------------------------------------------------ model
     def weight_of(self) -> dict[str, float]:
@@ -364,7 +368,6 @@ def design_problem(
         objective=Steady() if objective is None else objective,
         cost_weight=cost_weight if has_clearance else 0.0,
         cost_reference=5e-4,
-        title=f"design: {len(chosen)} variables, stroke 240 mm, transmission >= 40 deg",
         stroke=0.240,
         weights=tuple(weights),
     )

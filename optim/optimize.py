@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import time
 from pathlib import Path
 
@@ -63,7 +62,7 @@ class Settings:
         gtol: stop when the projected-gradient step is below this.
         xtol: stop when the design moves less than this ``patience`` times in a row.
         patience: see ``xtol``.
-        starts: designs to optimise from ([`multistart`][optim.optimize.multistart]): the problem's start, then
+        starts: designs to optimise from ([`multistart`][optim.starts.multistart]): the problem's start, then
             ``starts - 1`` scrambled Sobol points of the box; 1 runs [`optimize`][optim.optimize.optimize] alone.
         seed: seed of those Sobol points.
         max_seconds: wall-time budget of one [`optimize`][optim.optimize.optimize] call, s (None: none); the
@@ -179,6 +178,7 @@ def optimize(
     resume: bool = False,
     progress: bool = True,
     stop_after: int | None = None,
+    evaluator: SteadyEvaluator | None = None,
 ) -> dict:
     """Minimise ``problem`` from its start design.
 
@@ -186,14 +186,19 @@ def optimize(
         out: run directory for ``checkpoint.npz`` and ``history.csv`` (no checkpoints when None).
         resume: continue from ``out``'s checkpoint (error if there is none).
         stop_after: stop (as if killed) after this many iterations of this call (tests).
+        evaluator: steady-state objective only: the evaluator to use, e.g. the one that classified
+            the start ([`optim.starts.periodic_start`][]), whose last orbit warm-starts the first
+            evaluation (default: a new one).
 
     Returns a dict: ``history`` (one dict per iteration, columns of
     [`optim.checkpoint.history_columns`][]; ``evaluations``: value-and-gradient evaluations so far, the start's
     and this iteration's line search included; ``halvings``: the iteration's step shortenings), ``converged`` (the
     convergence test met, or None), ``stop_reason`` (why the run stopped, converged or not), ``evaluations`` (in
     all; a resumed line-search run re-evaluates its iterate once, not counted), ``f0`` (objective at the start,
-    degrees), ``final`` (the best SI design of the history), ``final_objective`` (its objective, degrees) and
-    ``last`` (the last iterate, SI).
+    degrees), ``final`` (the best SI design of the history), ``final_objective`` (its objective, degrees),
+    ``last`` (the last iterate, SI) and ``seconds`` (wall time, s: ``start``, the start's evaluation, and
+    ``iterations``, the iterations of this call; steady-state objective: ``gradient_compile``, the part of
+    both spent compiling gradient programs).
     """
     opt = settings.optimizer
     penalty = getattr(opt, "penalty", 10.0)
@@ -202,14 +207,15 @@ def optimize(
         # evaluated on the host, warm-started from the last orbit (not one compiled program)
         if isinstance(opt, LBFGS):
             raise ParameterError("the steady-state objective needs adam() or ProjectedLBFGS(), not LBFGS()")
-        evaluator = SteadyEvaluator(problem)
+        evaluator = SteadyEvaluator(problem) if evaluator is None else evaluator
+        compiled_before = evaluator.compile_seconds
         vg, extended = _steady_programs(problem, evaluator), None
     else:
         if settings.guard is not None:
             raise ParameterError(
                 "Settings.guard (the regime guard) needs the steady-state objective (optim.steady.Steady)"
             )
-        evaluator = None
+        evaluator, compiled_before = None, 0.0
         vg, extended = programs(dataclasses.replace(problem, start=None), penalty)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"
     if resume:
@@ -231,12 +237,14 @@ def optimize(
             ) from None
         quiet, converged, stop = meta["quiet"], meta["converged"], meta.get("stop_reason")
     else:
+        tic = time.perf_counter()
         u = problem.start_unit()
         # the objective at the start (degrees) scales the rest; its evaluation is iteration 0's
         first = _checked(problem, u, *vg(u, 1.0))
         f0 = float(first[0])
         first = (first[0] / f0, first[1] / f0)
         state, history, quiet, converged, stop = opt.init(u), [], 0, None, None
+    start_seconds = 0.0 if resume else time.perf_counter() - tic
 
     search = isinstance(opt, AbstractLineSearchOptimizer)
     trial = qn.trial_function(problem, vg, f0, settings.guard, evaluator)
@@ -325,6 +333,11 @@ def optimize(
         "final": [best[f"{n}_SI"] for n in problem.names],
         "final_objective": best["objective_deg"],
         "last": [history[-1][f"{n}_SI"] for n in problem.names],
+        "seconds": {
+            "start": start_seconds,
+            "iterations": time.perf_counter() - started,
+            **({"gradient_compile": evaluator.compile_seconds - compiled_before} if evaluator is not None else {}),
+        },
     }
 
 
@@ -349,101 +362,3 @@ def _guarded(problem: AbstractProblem, guard, evaluator, u, u_new):
             return u_new, k
         u_new = u + 0.5 * (u_new - u)
     return u, guard.max_halvings + 1
-
-
-def start_points(problem: AbstractProblem, count: int, seed: int = 0) -> np.ndarray:
-    """``count`` scaled start designs, shape (count, n): the problem's own start
-    (`Problem.start_unit`), then scrambled Sobol points of the unit box (``seed``)
-    projected onto the feasible set (`Problem.project`).
-
-    Raises:
-        ParameterError: for ``count < 1``.
-    """
-    import warnings
-
-    from scipy.stats import qmc
-
-    if count < 1:
-        raise ParameterError(f"starts = {count} must be >= 1")
-    first = np.asarray(problem.start_unit(), dtype=float)[None]
-    if count == 1:
-        return first
-    with warnings.catch_warnings():  # Sobol's balance warning for counts that are not powers of 2
-        warnings.simplefilter("ignore", UserWarning)
-        points = qmc.Sobol(d=problem.n, scramble=True, seed=seed).random(count - 1)
-    projected = np.stack([np.asarray(problem.project(jnp.asarray(p)), dtype=float) for p in points])
-    return np.concatenate([first, projected])
-
-
-def multistart(
-    problem: AbstractProblem,
-    settings: Settings = Settings(),
-    out: Path | None = None,
-    resume: bool = False,
-    progress: bool = True,
-) -> dict:
-    """Minimise ``problem`` from ``settings.starts`` designs ([`start_points`][optim.optimize.start_points]), one
-    run of [`optimize`][optim.optimize.optimize] after another, all sharing its compiled programs. For
-    objectives with several basins (impact-dominated designs often have them), the best
-    of several local runs.
-
-    Args:
-        out: run directory: start k runs in ``out/start_k`` (k = 000, 001, ...) with its
-            own checkpoint, and ``multistart.json`` records the start designs and the
-            finished runs (no checkpoints when None).
-        resume: continue the runs in ``out``: finished starts are read back from their
-            checkpoints, the interrupted one resumes, the rest run.
-
-    Returns [`optimize`][optim.optimize.optimize]'s dict of the best run (lowest ``final_objective``), plus
-    ``runs`` (per start: ``start_unit``, ``final``, ``final_objective``, ``converged``,
-    ``iterations``) and ``best_start`` (its index).
-
-    Raises:
-        ParameterError: ``out`` already holds a multistart run and ``resume`` is False, or
-            the run there was made with other start designs.
-    """
-    points = start_points(problem, settings.starts, settings.seed)
-    plan = None
-    if out is not None:
-        out = Path(out)
-        plan = out / "multistart.json"
-        if plan.exists():
-            if not resume:
-                raise ParameterError(f"{out} already holds a multistart run: pass --resume or choose another --out")
-            try:
-                recorded = np.asarray(json.loads(plan.read_text())["start_unit"], dtype=float)
-            except (ValueError, KeyError, TypeError) as err:
-                raise CorruptFileError(f"{plan}: cannot be read ({err})") from None
-            if recorded.shape != points.shape or not np.array_equal(recorded, points):
-                raise ParameterError(
-                    f"{plan}: the run was made from other start designs (starts, seed or problem differ)"
-                )
-        out.mkdir(parents=True, exist_ok=True)
-
-    def record(runs):
-        if plan is not None:  # written before the first start too: a killed run is never overwritten
-            tmp = plan.with_suffix(".tmp")
-            tmp.write_text(json.dumps({"start_unit": points.tolist(), "seed": settings.seed, "runs": runs}, indent=1))
-            tmp.replace(plan)
-
-    results, runs = [], []
-    if plan is not None and not plan.exists():
-        record(runs)
-    for k, u in enumerate(points):
-        x0 = tuple(float(v) for v in np.asarray(problem.from_unit(jnp.asarray(u))))
-        run_dir = None if out is None else out / f"start_{k:03d}"
-        again = run_dir is not None and resume and (run_dir / "checkpoint.npz").exists()
-        res = optimize(dataclasses.replace(problem, start=x0), settings, out=run_dir, resume=again, progress=progress)
-        results.append(res)
-        runs.append(
-            {
-                "start_unit": u.tolist(),
-                "final": res["final"],
-                "final_objective": res["final_objective"],
-                "converged": res["converged"],
-                "iterations": len(res["history"]),
-            }
-        )
-        record(runs)
-    best = int(np.argmin([r["final_objective"] for r in runs]))
-    return {**results[best], "runs": runs, "best_start": best}

@@ -13,7 +13,19 @@ import numpy as np  # noqa: E402
 def _unit(name: str) -> tuple[str, float, str]:
     """(label, factor from SI, unit) of a design variable, by the kind of its name: lengths
     (``*_length``, ``offset``, ``clearance_<joint>``) in mm, angles of the problem's
-    constraints (``*_transmission_angle``) in degrees, anything else in SI."""
+    constraints (``*_transmission_angle``) in degrees, masses in kg, inertias in kg m^2, Young's
+    moduli in GPa, viscosities in Pa s, ratios and coefficients without a unit ("1"), anything
+    else in SI."""
+    kinds = (
+        (("_mass",), 1.0, "kg"),
+        (("_inertia",), 1.0, "kg m^2"),
+        (("youngs_modulus",), 1e-9, "GPa"),
+        (("viscosity",), 1.0, "Pa s"),
+        (("_ratio", "coefficient", "restitution"), 1.0, "1"),
+    )
+    for suffixes, scale, unit in kinds:
+        if name.endswith(suffixes):
+            return name, scale, unit
     if name.startswith("clearance_"):
         return f"c_{name.removeprefix('clearance_')}", 1e3, "mm"
     if name.endswith("_length") or name == "offset":

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 
 import equinox as eqx
 import jax
@@ -202,9 +203,17 @@ def report(steady: S.SteadyState) -> dict:
 _PROGRAMS: dict = {}
 
 
+def forget_programs() -> None:
+    """Drop every compiled value-and-gradient program of the steady-state objective, so the next
+    evaluation compiles its own (benchmarks that count compilation in each method's time)."""
+    _PROGRAMS.clear()
+
+
 class SteadyEvaluator:
     """Value and exact gradient of a problem measured by a [`Steady`][optim.steady.Steady] objective, at
-    concrete designs, each steady state warm-started from the last periodic one.
+    concrete designs, each steady state warm-started from the last periodic one. A design
+    whose solve fails is data, not an error: its value is NaN and its regime ``"failed"``
+    (the objective is used with ``throw=False``), so an optimiser's trial point there is refused.
 
     Args:
         problem: a problem ([`AbstractProblem`][optim.problem.AbstractProblem]) whose objective is
@@ -219,12 +228,13 @@ class SteadyEvaluator:
             raise ParameterError(f"SteadyEvaluator needs a Steady objective, not {type(problem.objective).__name__}")
         if getattr(problem, "samples", 0):
             raise ParameterError("the steady-state objective does not average over manufactured parts (samples = 0)")
-        self.problem = problem
-        self.objective = problem.objective
+        self.problem = problem.with_objective(dataclasses.replace(problem.objective, throw=False))
+        self.objective = self.problem.objective
         self.last = None  # the last periodic steady state: the next warm start
         self._steady = {}
         self._trend = None
         self.last_report = {}  # report() of the last evaluated design
+        self.compile_seconds = 0.0  # wall time this evaluator spent compiling gradient programs, s
 
     def steady_at(self, x) -> S.SteadyState:
         """The steady state at SI design ``x`` (cached for the last few designs), warm-started
@@ -265,11 +275,12 @@ class SteadyEvaluator:
         steady = self.steady_at(x)
         return steady.regime if steady.ok else "failed"
 
-    def _program(self, steady: S.SteadyState):
+    def _program(self, steady: S.SteadyState, args):
         """The compiled value and gradient for the orbits of ``steady``'s period and
-        dynamic subspace, taking the design and the orbit's section state and monodromy:
-        one program serves every design of a regime, and every evaluator of the same
-        problem (its start aside: multistart runs share it)."""
+        dynamic subspace, taking ``args`` = (the design, the orbit's section state, its
+        monodromy): one program serves every design of a regime, and every evaluator of the
+        same problem (its start aside: multistart runs share it). Compiled at its first use,
+        timed into ``compile_seconds``."""
         key = (dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
         if key not in _PROGRAMS:
             problem, objective, template = key[0], self.objective, _light(steady)
@@ -281,7 +292,9 @@ class SteadyEvaluator:
 
             if len(_PROGRAMS) >= 8:
                 _PROGRAMS.pop(next(iter(_PROGRAMS)))
-            _PROGRAMS[key] = jax.jit(value_and_grad(f, True))
+            tic = time.perf_counter()
+            _PROGRAMS[key] = jax.jit(value_and_grad(f, True)).lower(*args).compile()
+            self.compile_seconds += time.perf_counter() - tic
         return _PROGRAMS[key]
 
     def value_and_grad(self, x) -> tuple[float, np.ndarray, dict]:
@@ -294,7 +307,8 @@ class SteadyEvaluator:
         if not steady.ok:
             return math.nan, np.full(x.shape, np.nan), info
         if steady.periodic:
-            value, grad = self._program(steady)(jnp.asarray(x), steady.section_state, steady.monodromy)
+            args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
+            value, grad = self._program(steady, args)(*args)
             return float(value), np.asarray(grad), info
         rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in rms_metrics(self.problem.base)}
         value = float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x)))

@@ -11,9 +11,10 @@ import pytest
 from jaxcrank.physics.params import ParameterError
 from optim import search
 from optim.objective import Pathwise
-from optim.optimize import Settings, multistart, optimize, programs, start_points
+from optim.optimize import Settings, optimize, programs
 from optim.optimizers import adam, from_settings
 from optim.presets import paper_problem
+from optim.starts import multistart, start_points
 from tests.objectives import SHORT
 
 

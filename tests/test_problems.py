@@ -213,6 +213,26 @@ def test_optim_has_no_import_cycle():
             visit(m, [])
 
 
+def test_the_steady_state_objective_has_its_own_default_optimiser_and_the_regime_guard():
+    """With the steady-state objective: the optimiser the head-to-head chose (STEADY_OPTIMIZER) and
+    every step kept in the periodic regime; an explicit method or setting is kept; windowed
+    objectives keep Adam at 0.1 and no guard."""
+    from optim.cli import STEADY_OPTIMIZER, build, resolved
+    from optim.steady import RegimeGuard
+
+    problem, settings = build({"problem": "design"})
+    assert settings.optimizer.settings() == {**settings.optimizer.settings(), **STEADY_OPTIMIZER}
+    assert isinstance(settings.guard, RegimeGuard)
+    _, resumed = build(resolved(problem, settings, "design"))  # what --resume reads back
+    assert resumed.optimizer.settings() == settings.optimizer.settings() and isinstance(resumed.guard, RegimeGuard)
+    _, chosen = build({"problem": "design", "optimizer": {"method": "projected_lbfgs"}})
+    assert chosen.optimizer.label == "projected_lbfgs" and isinstance(chosen.guard, RegimeGuard)
+    _, rate = build({"problem": "design", "optimizer": {"learning_rate": 0.02}})
+    assert rate.optimizer.settings()["learning_rate"] == 0.02
+    _, windowed = build({"problem": "paper"})
+    assert windowed.optimizer.settings() == {"method": "adam", "learning_rate": 0.1} and windowed.guard is None
+
+
 def test_steady_objective_config_round_trip():
     from optim.cli import build, resolved
     from optim.steady import Steady

@@ -29,12 +29,12 @@ def test_paper_preset_matches_table_1():
 
 
 def test_optimisation_reference_used_by_the_optimiser_cli():
-    from optim import cli
+    from optim import presets
     from optim.presets import paper_problem
 
     opt = reference.load()["optimisation"]
-    assert cli.PAPER_OPTIMUM_DEG == opt["optimum_deg"] == 0.097966
-    assert cli.PAPER_REDUCTION_PCT == opt["reduction_percent"]
+    assert presets.PAPER_OPTIMUM_DEG == opt["optimum_deg"] == 0.097966
+    assert presets.PAPER_REDUCTION_PCT == opt["reduction_percent"]
     problem = paper_problem()
     assert tuple(problem.lower) == (opt["crank_length_bounds_m"][0], opt["rod_length_bounds_m"][0])
     assert tuple(problem.upper) == (opt["crank_length_bounds_m"][1], opt["rod_length_bounds_m"][1])

@@ -1,0 +1,224 @@
+"""Where an optimisation starts: the problem's start and scrambled Sobol points of the box
+([`start_points`][optim.starts.start_points]), the best of local runs from several of them
+([`multistart`][optim.starts.multistart]), and, for the steady-state objective, the first
+periodic design among them ([`periodic_start`][optim.starts.periodic_start]).
+
+The steady-state gradient is exact on the periodic orbit and exactly zero outside the periodic
+regime (without a trend estimate), so a gradient run from a design that is not periodic has
+nowhere to go. [`periodic_start`][optim.starts.periodic_start] classifies candidate starts by
+their steady state, value only, until one is periodic, and hands that steady state to the
+optimiser (its evaluator warm-starts from it): the start is solved once.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+from tqdm.auto import tqdm
+
+from jaxcrank.errors import CorruptFileError
+from jaxcrank.physics.params import ParameterError
+
+from .optimize import Settings, optimize
+from .problem import AbstractProblem
+from .steady import PERIODIC, SteadyEvaluator
+
+#: candidate starts classified at most by `periodic_start` (the problem's start and 7 Sobol points)
+CLASSIFY_STARTS = 8
+
+
+def start_points(problem: AbstractProblem, count: int, seed: int = 0) -> np.ndarray:
+    """``count`` scaled start designs, shape (count, n): the problem's own start
+    (`Problem.start_unit`), then scrambled Sobol points of the unit box (``seed``)
+    projected onto the feasible set (`Problem.project`).
+
+    Raises:
+        ParameterError: for ``count < 1``.
+    """
+    import warnings
+
+    from scipy.stats import qmc
+
+    if count < 1:
+        raise ParameterError(f"starts = {count} must be >= 1")
+    first = np.asarray(problem.start_unit(), dtype=float)[None]
+    if count == 1:
+        return first
+    with warnings.catch_warnings():  # Sobol's balance warning for counts that are not powers of 2
+        warnings.simplefilter("ignore", UserWarning)
+        points = qmc.Sobol(d=problem.n, scramble=True, seed=seed).random(count - 1)
+    projected = np.stack([np.asarray(problem.project(jnp.asarray(p)), dtype=float) for p in points])
+    return np.concatenate([first, projected])
+
+
+def multistart(
+    problem: AbstractProblem,
+    settings: Settings | None = None,
+    out: Path | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> dict:
+    """Minimise ``problem`` from ``settings.starts`` designs ([`start_points`][optim.starts.start_points]), one
+    run of [`optimize`][optim.optimize.optimize] after another, all sharing its compiled programs. For
+    objectives with several basins (impact-dominated designs often have them), the best
+    of several local runs.
+
+    Args:
+        out: run directory: start k runs in ``out/start_k`` (k = 000, 001, ...) with its
+            own checkpoint, and ``multistart.json`` records the start designs and the
+            finished runs (no checkpoints when None).
+        resume: continue the runs in ``out``: finished starts are read back from their
+            checkpoints, the interrupted one resumes, the rest run.
+
+    Returns [`optimize`][optim.optimize.optimize]'s dict of the best run (lowest ``final_objective``), plus
+    ``runs`` (per start: ``start_unit``, ``final``, ``final_objective``, ``converged``,
+    ``iterations``) and ``best_start`` (its index).
+
+    Raises:
+        ParameterError: ``out`` already holds a multistart run and ``resume`` is False, or
+            the run there was made with other start designs.
+    """
+    settings = Settings() if settings is None else settings
+    points = start_points(problem, settings.starts, settings.seed)
+    plan = None
+    if out is not None:
+        out = Path(out)
+        plan = out / "multistart.json"
+        if plan.exists():
+            if not resume:
+                raise ParameterError(f"{out} already holds a multistart run: pass --resume or choose another --out")
+            try:
+                recorded = np.asarray(json.loads(plan.read_text())["start_unit"], dtype=float)
+            except (ValueError, KeyError, TypeError) as err:
+                raise CorruptFileError(f"{plan}: cannot be read ({err})") from None
+            if recorded.shape != points.shape or not np.array_equal(recorded, points):
+                raise ParameterError(
+                    f"{plan}: the run was made from other start designs (starts, seed or problem differ)"
+                )
+        out.mkdir(parents=True, exist_ok=True)
+
+    def record(runs):
+        if plan is not None:  # written before the first start too: a killed run is never overwritten
+            tmp = plan.with_suffix(".tmp")
+            tmp.write_text(json.dumps({"start_unit": points.tolist(), "seed": settings.seed, "runs": runs}, indent=1))
+            tmp.replace(plan)
+
+    results, runs = [], []
+    if plan is not None and not plan.exists():
+        record(runs)
+    for k, u in enumerate(points):
+        x0 = tuple(float(v) for v in np.asarray(problem.from_unit(jnp.asarray(u))))
+        run_dir = None if out is None else out / f"start_{k:03d}"
+        again = run_dir is not None and resume and (run_dir / "checkpoint.npz").exists()
+        res = optimize(dataclasses.replace(problem, start=x0), settings, out=run_dir, resume=again, progress=progress)
+        results.append(res)
+        runs.append(
+            {
+                "start_unit": u.tolist(),
+                "final": res["final"],
+                "final_objective": res["final_objective"],
+                "converged": res["converged"],
+                "iterations": len(res["history"]),
+            }
+        )
+        record(runs)
+    best = int(np.argmin([r["final_objective"] for r in runs]))
+    return {**results[best], "runs": runs, "best_start": best}
+
+
+@dataclasses.dataclass
+class StartSearch:
+    """What [`periodic_start`][optim.starts.periodic_start] found.
+
+    Attributes:
+        problem: the problem with its start replaced by the chosen design (SI).
+        evaluator: the steady-state evaluator that classified the candidates; its last
+            periodic steady state is the chosen start's, so passing it to
+            [`optimize`][optim.optimize.optimize] does not solve the start again.
+        classified: per candidate, in order: ``unit_design`` (scaled), ``value_deg`` (the
+            objective, degrees; None where the solve failed), ``regime`` and ``seconds``
+            (wall time of its classification, s; the first includes compilation).
+        chosen: index of the chosen candidate in ``classified``.
+        periodic: whether the chosen design is periodic (False: no candidate was; the
+            problem's own start is kept).
+    """
+
+    problem: AbstractProblem
+    evaluator: SteadyEvaluator
+    classified: list
+    chosen: int
+    periodic: bool
+
+    @property
+    def seconds(self) -> float:
+        """Wall time of the whole search, s."""
+        return float(sum(c["seconds"] for c in self.classified))
+
+    def describe(self) -> dict:
+        """Plain values for ``result.json``: ``classified``, ``chosen``, ``periodic``, ``seconds``."""
+        return {
+            "classified": self.classified,
+            "chosen": self.chosen,
+            "periodic": self.periodic,
+            "seconds": self.seconds,
+        }
+
+
+def periodic_start(
+    problem: AbstractProblem,
+    count: int = CLASSIFY_STARTS,
+    seed: int = 0,
+    evaluator: SteadyEvaluator | None = None,
+    progress: bool = True,
+) -> StartSearch:
+    """The first periodic design among ``count`` candidate starts of a steady-state problem
+    ([`start_points`][optim.starts.start_points]: the problem's start, then scrambled Sobol
+    points), each classified by its steady state (value only), stopping at the first
+    periodic one.
+
+    Args:
+        problem: a problem whose objective is [`optim.steady.Steady`][].
+        count: candidates classified at most, >= 1.
+        seed: seed of the Sobol points.
+        evaluator: the evaluator to classify with (default: a new one for ``problem``).
+        progress: show a progress bar over the candidates.
+
+    Returns:
+        a [`StartSearch`][optim.starts.StartSearch]; where no candidate is periodic, the
+        problem's own start is kept and ``periodic`` is False (an optimiser run from it stops
+        at once, saying why).
+
+    Raises:
+        ParameterError: ``count < 1`` or an objective other than the steady state.
+    """
+    evaluator = SteadyEvaluator(problem) if evaluator is None else evaluator
+    points = start_points(problem, count, seed)
+    classified = []
+    bar = tqdm(points, desc="classifying starts", unit="design", disable=not progress)
+    for u in bar:
+        tic = time.perf_counter()
+        value, info = evaluator.value(np.asarray(problem.from_unit(jnp.asarray(u))))
+        regime = info["regime"] if info["ok"] else "failed"
+        classified.append(
+            {
+                "unit_design": np.asarray(u).tolist(),
+                "value_deg": float(value) if np.isfinite(value) else None,
+                "regime": regime,
+                "seconds": time.perf_counter() - tic,
+            }
+        )
+        bar.set_postfix(regime=regime)
+        if regime == PERIODIC:
+            break
+    bar.close()
+    periodic = classified[-1]["regime"] == PERIODIC
+    chosen = len(classified) - 1 if periodic else 0
+    if chosen:
+        x0 = tuple(float(v) for v in np.asarray(problem.from_unit(jnp.asarray(classified[chosen]["unit_design"]))))
+        problem = dataclasses.replace(problem, start=x0)
+    return StartSearch(problem, evaluator, classified, chosen, periodic)

@@ -1,0 +1,83 @@
+"""Where an optimisation starts (optim.starts): the way in for the steady-state objective
+classifies candidate starts until one is periodic and hands its evaluator to the optimiser.
+The steady-state evaluator is the stand-in of test_quasi_newton: no mechanism is solved."""
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from optim.optimize import Settings, optimize
+from optim.optimizers import ProjectedLBFGS
+from optim.starts import periodic_start, start_points
+from optim.steady import NOT_PERIODIC, PERIODIC, RegimeGuard
+from tests.test_quasi_newton import _Evaluator, _patch, steady_problem
+
+
+def _start(prob, u):
+    return dataclasses.replace(prob, start=tuple(float(v) for v in np.asarray(prob.from_unit(jnp.asarray(u)))))
+
+
+def test_a_periodic_start_is_kept_after_one_classification():
+    prob = steady_problem()  # start u = (0.1, 0.1, 0.1): periodic (u_2 < 0.6)
+    ev = _Evaluator(prob)
+    found = periodic_start(prob, evaluator=ev, progress=False)
+    assert found.periodic and found.chosen == 0 and len(found.classified) == 1
+    assert found.problem is prob and found.evaluator is ev
+    assert found.describe()["classified"][0]["regime"] == PERIODIC
+
+
+def test_a_not_periodic_start_is_replaced_by_the_first_periodic_candidate():
+    """From u_2 = 0.9 (not periodic) the Sobol candidates are classified in order until the
+    first periodic one, which becomes the start; nothing after it is classified."""
+    prob = _start(steady_problem(), [0.1, 0.1, 0.9])
+    ev = _Evaluator(prob)
+    found = periodic_start(prob, count=8, seed=3, evaluator=ev, progress=False)
+    candidates = start_points(prob, 8, seed=3)
+    k = next(i for i, u in enumerate(candidates) if u[2] < 0.6)
+    assert k > 0 and found.periodic and found.chosen == k == len(found.classified) - 1
+    assert [c["regime"] for c in found.classified] == [NOT_PERIODIC] * k + [PERIODIC]
+    np.testing.assert_allclose(np.asarray(found.problem.start_unit()), candidates[k], atol=1e-12)
+    np.testing.assert_allclose(np.asarray(ev.classified), candidates[: k + 1], atol=1e-12)
+
+
+def test_no_periodic_candidate_keeps_the_start_and_the_run_from_it_is_not_converged(monkeypatch):
+    """Nothing in the box is periodic: every candidate is classified, the start is kept, and
+    the optimiser run from it (with the search's evaluator: no new one is made) stops at once,
+    not converged, saying why."""
+    made = _patch(monkeypatch, periodic=lambda u: False)
+    prob = steady_problem()
+    ev = _Evaluator(prob, periodic=lambda u: False)
+    found = periodic_start(prob, count=4, evaluator=ev, progress=False)
+    assert not found.periodic and found.chosen == 0 and len(found.classified) == 4
+    assert found.problem is prob
+    res = optimize(found.problem, Settings(optimizer=ProjectedLBFGS()), progress=False, evaluator=found.evaluator)
+    assert not made  # the search's evaluator was used
+    assert res["converged"] is None and res["stop_reason"].startswith("not periodic at")
+
+
+def test_the_optimiser_continues_from_the_chosen_start_with_the_carried_evaluator(monkeypatch):
+    """From a not-periodic start the way in finds a periodic candidate; the run from it uses the
+    same evaluator (the start is not solved again: its first evaluation is the optimiser's),
+    keeps every evaluated design periodic and in the box, and converges to the constrained
+    minimum of the stand-in objective."""
+    made = _patch(monkeypatch)
+    prob = _start(steady_problem(), [0.1, 0.1, 0.9])
+    ev = _Evaluator(prob)
+    found = periodic_start(prob, seed=3, evaluator=ev, progress=False)
+    settings = Settings(optimizer=ProjectedLBFGS(), max_iterations=40, gtol=1e-9, xtol=0.0, guard=RegimeGuard())
+    res = optimize(found.problem, settings, progress=False, evaluator=found.evaluator)
+    assert not made and res["converged"], res["stop_reason"]
+    np.testing.assert_allclose(np.asarray(prob.to_unit(jnp.asarray(res["last"]))), [0.25, 1.0, 0.5], atol=1e-8)
+    designs = np.asarray(ev.evaluated)
+    assert all(ev.periodic(u) for u in designs)
+    assert designs.min() >= 0.0 and designs.max() <= 1.0 and np.max(designs[:, 0] + designs[:, 1]) <= 1.25 + 1e-12
+    assert set(res["seconds"]) == {"start", "iterations", "gradient_compile"}
+
+
+def test_count_below_one_is_refused():
+    from jaxcrank.physics.params import ParameterError
+
+    with pytest.raises(ParameterError, match="starts = 0"):
+        periodic_start(steady_problem(), count=0, evaluator=_Evaluator(steady_problem()), progress=False)
