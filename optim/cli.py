@@ -176,10 +176,15 @@ def build(cfg) -> tuple[Problem, Settings]:
     if name not in PROBLEMS:
         raise ParameterError(f"problem {name!r} is unknown; valid: {', '.join(PROBLEMS)}")
     section = cfg.get("objective", {})
-    problem = PROBLEMS[name](**({"objective": objective_from_config(section)} if section else {}))
+    design = dict(cfg.get("design", {}))
+    kwargs = {"objective": objective_from_config(section)} if section else {}
+    if "variables" in design:  # a subset of the design problem's variables, at their default bounds
+        if name != "design":
+            raise ParameterError(f"[design] variables: only the design problem takes it, not {name!r}")
+        kwargs["variables"] = tuple(design.pop("variables"))
+    problem = PROBLEMS[name](**kwargs)
     if "mechanism" in cfg:
         problem = dataclasses.replace(problem, base=mech_config.from_dict(cfg["mechanism"]))
-    design = dict(cfg.get("design", {}))
     if design:
         design = _fields(type(problem), "design", design)
         design = {

@@ -348,6 +348,9 @@ def design_problem(
     cost. ``objective``: default the steady state ([`optim.steady.Steady`][], the
     terms over one period of the periodic orbit). ``variables``: a subset of the names
     (the others stay at their start values, folded into the base mechanism)."""
+    unknown = set(variables or ()) - {v[0] for v in DESIGN_VARIABLES}
+    if unknown:
+        raise ParameterError(f"unknown design variables {sorted(unknown)}; valid: {[v[0] for v in DESIGN_VARIABLES]}")
     chosen = [v for v in DESIGN_VARIABLES if variables is None or v[0] in variables]
     base = paper()
     fixed = [v for v in DESIGN_VARIABLES if v not in chosen]

@@ -247,3 +247,23 @@ def test_steady_objective_config_round_trip():
         build({"problem": "paper", "optimizer": {"method": "sgd"}})
     with pytest.raises(ParameterError, match=r"unknown \[optimizer\] keys \['learning_rate'\] for method 'lbfgs'"):
         build({"problem": "paper", "optimizer": {"method": "lbfgs", "learning_rate": 0.1}})
+
+
+def test_the_design_config_chooses_a_subset_of_its_variables_by_name():
+    """``[design] variables``: the design problem with those variables at their default bounds
+    (the others fixed at their start values); a resume reads the same problem back; a name it does
+    not know, or another problem, is refused naming the key."""
+    from optim.cli import build, resolved
+    from optim.design import design_problem
+
+    chosen = ["rod_length", "min_transmission_angle", "clearance_C"]
+    problem, settings = build({"problem": "design", "design": {"variables": chosen, "stroke": 0.22}})
+    expect = design_problem(variables=chosen)
+    assert problem.names == tuple(chosen) and problem.lower == expect.lower and problem.upper == expect.upper
+    assert problem.stroke == 0.22 and problem.description.startswith("design: 3 variables, stroke 220 mm")
+    again, _ = build(resolved(problem, settings, "design"))
+    assert again.names == problem.names and again.start == problem.start and again.base == problem.base
+    with pytest.raises(ParameterError, match=r"unknown design variables \['rod_lenght'\]; valid: \['rod_length'"):
+        build({"problem": "design", "design": {"variables": ["rod_lenght"]}})
+    with pytest.raises(ParameterError, match=r"\[design\] variables: only the design problem takes it, not 'paper'"):
+        build({"problem": "paper", "design": {"variables": ["rod_length"]}})
