@@ -418,7 +418,7 @@ def run(args) -> int:
     print(
         f"{problem.description}: {f_start:.5f} -> {res['final_objective']:.5f} deg "
         f"({result['reduction_percent']:.2f} % lower) at "
-        + ", ".join(f"{n} = {v * plots.factor(n):.6g} {plots.unit(n)}" for n, v in zip(problem.names, res["final"]))
+        + ", ".join(plots.value_text(n, v) for n, v in zip(problem.names, res["final"]))
         + (f"; grid best {grid_info['best_objective_deg']:.5f} deg" if grid_info else "")
     )
     print(f"{'converged' if result['converged'] else 'not converged'}: {res['stop_reason']}")

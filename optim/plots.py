@@ -14,14 +14,14 @@ def _unit(name: str) -> tuple[str, float, str]:
     """(label, factor from SI, unit) of a design variable, by the kind of its name: lengths
     (``*_length``, ``offset``, ``clearance_<joint>``) in mm, angles of the problem's
     constraints (``*_transmission_angle``) in degrees, masses in kg, inertias in kg m^2, Young's
-    moduli in GPa, viscosities in Pa s, ratios and coefficients without a unit ("1"), anything
+    moduli in GPa, viscosities in Pa s, ratios and coefficients without a unit (""), anything
     else in SI."""
     kinds = (
         (("_mass",), 1.0, "kg"),
         (("_inertia",), 1.0, "kg m^2"),
         (("youngs_modulus",), 1e-9, "GPa"),
         (("viscosity",), 1.0, "Pa s"),
-        (("_ratio", "coefficient", "restitution"), 1.0, "1"),
+        (("_ratio", "coefficient", "restitution"), 1.0, ""),
     )
     for suffixes, scale, unit in kinds:
         if name.endswith(suffixes):
@@ -37,15 +37,20 @@ def _unit(name: str) -> tuple[str, float, str]:
 
 def label(name):
     short, _, unit = _unit(name)
-    return f"{short} [{unit}]"
+    return f"{short} [{unit}]" if unit else short
 
 
 def factor(name):
     return _unit(name)[1]
 
 
+def value_text(name, value) -> str:
+    """``name = value unit`` for a report, the SI ``value`` in the unit the variable is shown in."""
+    return f"{name} = {value * factor(name):.6g} {unit(name)}".rstrip()
+
+
 def unit(name):
-    """The unit a design variable is shown in (``mm``, ``deg`` or ``SI``)."""
+    """The unit a design variable is shown in (``mm``, ``deg``, ``kg``, ...; ``""`` without one)."""
     return _unit(name)[2]
 
 
