@@ -1,42 +1,47 @@
-"""Head-to-head on the steady state, judged on held-out long runs.
+"""Head-to-head on the steady state over a family of design problems, in CPU time, judged
+on held-out long runs.
 
-``taskset -c 1 python bench/bench_design.py [--budget 500] [--seed 0] [--checkpoints ...] [--out FILE]``
+``python bench/bench_design.py --problem NAME --seed S`` runs one part (every method on one
+problem and seed) into ``bench/results/design_parts/NAME_seedS.json``;
+``python bench/bench_design.py --merge`` combines the parts into ``bench/results/design.json``
+and ``design.png``. A part that exists is not run again (a killed run loses only the part in
+progress). Run parts pinned to one core each (``taskset -c 0 ...``, ``taskset -c 1 ...``): the
+budgets are CPU time of the method's process, so other load on the machine does not decide.
 
-(``taskset -c 1``: one core for the methods, the other free for other work, so that the wall
-budgets are not shared with it.)
+**Problems** (`PROBLEMS`): the nine-variable design problem (:func:`optim.design.design_problem`)
+at its preset stroke and crank speed, and variants of both. Every method optimises the same
+steady-state objective (:class:`optim.steady.Steady` at `STEADY`: Eq. 19 and the design terms
+over one period of the periodic orbit; outside the periodic regime the long-run statistical
+value) over the scaled box [0, 1]^9 from the problem's start design, with the same CPU budget:
 
-Problem: the nine-variable design problem (:func:`optim.design.design_problem`) with the
-steady-state objective (:class:`optim.steady.Steady`: Eq. 19 and the design terms over one
-period of the periodic orbit; outside the periodic regime the long-run statistical value).
-Every method optimises that same objective over the scaled box [0, 1]^9 from the same start
-design (the preset's, which is not periodic), with the same wall budget, one process each,
-one after another:
-
-- ``ours``: regime-classified start, then gradients. The start and scrambled Sobol points
-  are classified by the steady-state solve (value only) until a periodic design is found
-  (at most ``CLASSIFY`` designs); from it (the best periodic one), projected Adam on the
-  exact steady-state gradient with the regime guard (a step that leaves the periodic regime
-  is halved, then held: :class:`optim.steady.RegimeGuard`), until the budget is spent.
-- ``cma`` (CMA-ES, ``cma``), ``tpe`` (optuna's TPE), ``nelder_mead`` (scipy, bounded),
-  ``sobol`` (scrambled Sobol points): the objective's value only.
+- ``ours_adam``: the library's way in and projected Adam (`LEARNING_RATE`). The start's regime
+  is classified and, if it is not periodic, scrambled Sobol points until one is
+  (:func:`optim.starts.periodic_start`, at most `CLASSIFY`); from it, Adam on the exact
+  steady-state gradient with the regime guard (:class:`optim.steady.RegimeGuard`), the
+  classification's orbit carried in.
+- ``ours_lbfgs``: the same with projected L-BFGS (:class:`optim.optimizers.ProjectedLBFGS`).
+  The better of the two by time to 1 % is the library's default (`DEFAULT`), and the target
+  is measured on it.
+- ``cma`` (CMA-ES, ``cma``), ``tpe`` (optuna's TPE): the objective's value only.
 
 Every evaluation of every method is warm-started from the last periodic orbit its own
-evaluator found (:class:`optim.steady.SteadyEvaluator`). Compilation is done before the first
-method, untimed: the steady-state solve (``compile_s``, every method uses it) and our
-value-and-gradient program (``gradient_compile_s``, at the periodic CMA-ES design of
-``bench/results/design_study.json``, used only to compile it; the program is shared by
-every evaluator of the problem).
+evaluator found (:class:`optim.steady.SteadyEvaluator`). The steady-state solve is compiled
+before the first method, untimed (``compile_s``); each of our methods compiles its own gradient
+programs inside its budget (``gradient_compile_s``; none is inherited from the other). Every
+evaluation a method makes (line-search trial points included) counts towards its best-so-far design.
 
 **Held-out truth.** Each method's best-so-far design (by the objective it optimised) at
-``CHECKPOINTS`` fractions of the budget, its returned design among them, is scored by a
-held-out evaluation that no method optimised: a simulation from rest of ``HELDOUT
-["revolutions"]`` revolutions at the library's default tolerances, the RMS metrics over the
-last ``HELDOUT["last_revolutions"]``, the problem's weighted value, averaged over
-``HELDOUT["realisations"]`` realisations whose initial crank angle differs by
-``HELDOUT["perturbation_rad"]`` (far below any tolerance). ``time_to_1pct_s``: the first
+``CHECKPOINTS`` fractions of the budget is scored by an evaluation no method optimised: a
+simulation from rest of ``HELDOUT["revolutions"]`` revolutions at the library's default
+tolerances, the problem's weighted value over the last ``HELDOUT["last_revolutions"]``,
+averaged over ``HELDOUT["realisations"]`` realisations, each with its own initial crank angle
+(offset uniform in +-``HELDOUT["crank_angle_rad"]``) and its own pin start positions (each
+position coordinate offset uniform in +-``HELDOUT["pin_offset_clearances"]`` clearances); the
+draws (seed ``HELDOUT["seed"]``) are the same for every design. ``time_to_1pct_s``: the first
 checkpoint at which a method's held-out value is within 1 % of the best held-out value any
-method reached; ``speedup_vs_best_gradient_free``: the best gradient-free method's time
-over ours (None when either never gets there).
+method reached on that problem (both seeds); ``speedup_vs_best_gradient_free``: the best
+gradient-free method's time over ours (a lower bound, budget over ours' time, where no
+gradient-free method gets there).
 """
 
 from __future__ import annotations
@@ -44,8 +49,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -54,9 +57,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-#: the steady-state objective's settings in the bench (looser than the library's default
-#: 1e-10 so that a cold steady-state solve takes seconds on the 2-core machine)
+#: the steady-state objective's settings in the bench, for every method (looser than the
+#: library's default 1e-10 so that a cold steady-state solve takes seconds on the 2-core machine)
 STEADY = dict(
     rtol=1e-8,
     atol=1e-8,
@@ -67,22 +71,50 @@ STEADY = dict(
     samples_per_revolution=360,
     max_steps=300_000,
 )
+#: the family: name -> (target stroke, m; crank speed, rpm)
+PROBLEMS = {
+    "preset": (0.240, 600.0),
+    "short_fast": (0.200, 750.0),
+    "mid_slow": (0.220, 480.0),
+    "long_fast": (0.240, 720.0),
+}
 #: the held-out evaluation
-HELDOUT = dict(revolutions=20, last_revolutions=5, realisations=4, perturbation_rad=1e-9, samples_per_revolution=360)
+HELDOUT = dict(
+    revolutions=20,
+    last_revolutions=5,
+    realisations=3,
+    crank_angle_rad=1e-3,
+    pin_offset_clearances=0.25,
+    seed=2026,
+    samples_per_revolution=360,
+)
 #: fractions of the budget at which best-so-far designs are scored (finer early, where they change most)
-CHECKPOINTS = (1 / 64, 1 / 32, 1 / 16, 3 / 32, 1 / 8, 5 / 32, 3 / 16, 1 / 4, 3 / 8, 1 / 2, 3 / 4, 1.0)
-CLASSIFY = 8  # ours: designs classified at most before the gradient phase
-LEARNING_RATE = 0.05  # ours: Adam step, scaled design units
-GRADIENT_FREE = ("cma", "tpe", "nelder_mead", "sobol")
-METHODS = ("ours",) + GRADIENT_FREE
+CHECKPOINTS = (1 / 32, 1 / 16, 1 / 8, 3 / 16, 1 / 4, 3 / 8, 1 / 2, 3 / 4, 1.0)
+CLASSIFY = 8  # ours: candidate starts classified at most
+LEARNING_RATE = 0.05  # ours_adam: Adam step, scaled design units
+GRADIENT_FREE = ("cma", "tpe")
+OURS = ("ours_adam", "ours_lbfgs")
+METHODS = OURS + GRADIENT_FREE
+#: our default optimiser of the steady-state objective, the one the target is measured on (chosen by this bench)
+DEFAULT = "ours_adam"
+PARTS = ROOT / "bench" / "results" / "design_parts"
 
 
-def build():
-    """The nine-variable design problem with the bench's steady-state objective."""
+def build(name: str):
+    """The nine-variable design problem of the family member ``name`` with the bench's
+    steady-state objective."""
+    import dataclasses
+
+    import equinox as eqx
+
     from optim.design import design_problem
     from optim.steady import Steady
 
-    return design_problem(Steady(**STEADY))
+    stroke, rpm = PROBLEMS[name]
+    problem = design_problem(Steady(**STEADY))
+    base = eqx.tree_at(lambda m: m.driver.speed, problem.base, rpm * 2.0 * math.pi / 60.0)
+    title = f"design: {problem.n} variables, stroke {stroke * 1e3:g} mm, {rpm:g} rpm"
+    return dataclasses.replace(problem, base=base, stroke=stroke, title=title)
 
 
 def heldout_program(problem, heldout=HELDOUT):
@@ -93,76 +125,90 @@ def heldout_program(problem, heldout=HELDOUT):
     import jax.numpy as jnp
 
     import jaxcrank as jc
+    from jaxcrank.physics.state import initial_state, state_names
 
-    revs, last = heldout["revolutions"], heldout["last_revolutions"]
+    revs, last, per_rev = heldout["revolutions"], heldout["last_revolutions"], heldout["samples_per_revolution"]
+    rng = np.random.default_rng(heldout["seed"])
+    count = heldout["realisations"]
+    n = sum(name.startswith("d/dt ") for name in state_names(problem.base))  # position coordinates, scaled
+    dphis = jnp.asarray(rng.uniform(-1.0, 1.0, count) * heldout["crank_angle_rad"])
+    dpos = jnp.asarray(rng.uniform(-1.0, 1.0, (count, n)) * heldout["pin_offset_clearances"])
 
-    def one(x, dphi):
+    def one(x, dphi, dy):
         mech = problem.mechanism(x)
         mech = eqx.tree_at(lambda m: m.driver.initial_angle, mech, mech.driver.initial_angle + dphi)
+        y0 = initial_state(mech).at[:n].add(dy)
         period = mech.period
-        n = revs * heldout["samples_per_revolution"]
-        ts = jnp.linspace(0.0, revs * period, n + 1)
+        ts = jnp.linspace(0.0, revs * period, revs * per_rev + 1)
         # between samples: no rounding decides which samples are in the statistics
-        start = (revs - last) * period + 0.5 * period / heldout["samples_per_revolution"]
-        sim = jc.simulate(mech, ts=ts, metrics_start=start, save_ts=ts[-1:], max_steps=5_000_000, throw=False)
+        start = (revs - last) * period + 0.5 * period / per_rev
+        sim = jc.simulate(mech, ts=ts, y0=y0, metrics_start=start, save_ts=ts[-1:], max_steps=5_000_000, throw=False)
         value = problem.loss(sim.metrics) + problem.cost(x)
         return jnp.where(sim.ok, value, jnp.nan), sim.ok
 
-    dphis = heldout["perturbation_rad"] * jnp.arange(heldout["realisations"], dtype=float)
-    return jax.jit(lambda x: jax.vmap(lambda d: one(x, d))(dphis))
+    return jax.jit(lambda x: jax.vmap(lambda d, dy: one(x, d, dy))(dphis, dpos))
 
 
 class Budget(Exception):
-    """The method's wall budget is spent."""
+    """The method's CPU budget is spent."""
 
 
-class Clock:
-    """Times and records every objective evaluation of one method run."""
+def timed_evaluator(problem, budget: float):
+    """A :class:`optim.steady.SteadyEvaluator` that records every evaluation
+    (``trace``: CPU seconds since its creation, value, unit design, regime) and raises
+    `Budget` at the first evaluation after ``budget`` CPU seconds."""
+    from optim.steady import SteadyEvaluator
 
-    def __init__(self, problem, evaluator, budget):
-        self.problem, self.evaluator, self.budget = problem, evaluator, budget
-        self.t0 = time.perf_counter()
-        self.trace = []  # (seconds, value, unit design, regime)
+    class Timed(SteadyEvaluator):
+        def __init__(self):
+            super().__init__(problem)
+            self.t0, self.trace = time.process_time(), []
 
-    def elapsed(self):
-        return time.perf_counter() - self.t0
+        def elapsed(self):
+            return time.process_time() - self.t0
 
-    def value(self, u):
-        if self.elapsed() > self.budget:
-            raise Budget
-        u = np.clip(np.asarray(u, float), 0.0, 1.0)
-        try:
-            v, info = self.evaluator.value(np.asarray(self.problem.from_unit(u)))
-            regime = info["regime"] if info["ok"] else "failed"
-        except Exception:  # noqa: BLE001 - a solver error: a failed design
-            v, regime = math.nan, "failed"
-        v = v if math.isfinite(v) else math.inf
-        self.trace.append((self.elapsed(), v, u.tolist(), regime))
-        return v
+        def _record(self, x, value, info):
+            regime = info.get("regime", "failed") if info.get("ok", False) else "failed"
+            value = value if math.isfinite(value) else math.inf
+            unit = np.clip(np.asarray(problem.to_unit(np.asarray(x, float))), 0.0, 1.0).tolist()
+            self.trace.append((self.elapsed(), value, unit, regime))
+
+        def value(self, x):
+            if self.elapsed() > budget:
+                raise Budget
+            try:
+                value, info = super().value(x)
+            except Exception:  # noqa: BLE001 - a solver error: a failed design
+                value, info = math.nan, {"ok": False}
+            self._record(x, value, info)
+            return value, info
+
+        def value_and_grad(self, x):
+            if self.elapsed() > budget:
+                raise Budget
+            value, grad, info = super().value_and_grad(x)
+            self._record(x, value, info)
+            return value, grad, info
+
+        def unit_value(self, u):
+            """The value at scaled design ``u`` (clipped to the box), for the gradient-free methods."""
+            u = np.clip(np.asarray(u, float), 0.0, 1.0)
+            value = self.value(np.asarray(problem.from_unit(u)))[0]
+            return min(value, 1e6) if math.isfinite(value) else 1e6  # a failed design: a large finite value
+
+    return Timed()
 
 
-def run_cma(clock, n, start, seed):
+def run_cma(ev, n, start, seed):
     import cma
 
     es = cma.CMAEvolutionStrategy(list(start), 0.25, {"bounds": [0.0, 1.0], "seed": seed + 1, "verbose": -9})
     while not es.stop():
         xs = es.ask()
-        es.tell(xs, [min(clock.value(x), 1e6) for x in xs])
+        es.tell(xs, [ev.unit_value(x) for x in xs])
 
 
-def run_nelder_mead(clock, n, start, seed):
-    from scipy.optimize import minimize
-
-    minimize(
-        lambda u: min(clock.value(u), 1e6),
-        np.asarray(start),
-        method="Nelder-Mead",
-        bounds=[(0.0, 1.0)] * n,
-        options={"maxfev": 100000, "xatol": 1e-6, "fatol": 1e-9},
-    )
-
-
-def run_tpe(clock, n, start, seed):
+def run_tpe(ev, n, start, seed):
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -171,65 +217,43 @@ def run_tpe(clock, n, start, seed):
     while True:
         trial = study.ask()
         u = [trial.suggest_float(f"u{j}", 0.0, 1.0) for j in range(n)]
-        study.tell(trial, min(clock.value(u), 1e6))
+        study.tell(trial, ev.unit_value(u))
 
 
-def run_sobol(clock, n, start, seed):
-    from scipy.stats import qmc
-
-    clock.value(start)
-    sampler = qmc.Sobol(d=n, scramble=True, seed=seed)
-    while True:
-        for u in sampler.random(2):
-            clock.value(u)
-
-
-def run_ours(clock, problem, start, seed, info):
-    """Regime-classified start, then projected Adam with the regime guard (module docstring)."""
-    import dataclasses
-
-    from optim.optimize import Settings, optimize, start_points
-    from optim.optimizers import adam
+def run_ours(ev, problem, seed, info, adam: bool):
+    """The library's way in (periodic_start) and then projected L-BFGS (or Adam) with the
+    regime guard, the classification's orbit carried in (module docstring)."""
+    from optim.optimize import Settings, optimize
+    from optim.optimizers import ProjectedLBFGS
+    from optim.optimizers import adam as make_adam
+    from optim.starts import periodic_start
     from optim.steady import RegimeGuard
 
-    x0 = tuple(float(v) for v in np.asarray(problem.from_unit(np.asarray(start))))
-    points = start_points(dataclasses.replace(problem, start=x0), CLASSIFY, seed)
-    classified = info["classified"] = []
-    for u in points:
-        v = clock.value(u)
-        classified.append({"unit_design": np.asarray(u).tolist(), "value": v, "regime": clock.trace[-1][3]})
-        if any(c["regime"] == "periodic" for c in classified):
-            break
-    periodic = [c for c in classified if c["regime"] == "periodic"]
-    if not periodic:
+    search = periodic_start(problem, count=CLASSIFY, seed=seed, evaluator=ev, progress=False)
+    info["start_search"] = search.describe()
+    info["classification_cpu_s"] = ev.elapsed()
+    if not search.periodic:
         info["note"] = "no periodic design among the classified ones: no gradient phase"
         return
-    best = min(periodic, key=lambda c: c["value"])
-    prob = dataclasses.replace(problem, start=tuple(np.asarray(problem.from_unit(np.asarray(best["unit_design"])))))
     settings = Settings(
-        optimizer=adam(LEARNING_RATE),
+        optimizer=make_adam(LEARNING_RATE) if adam else ProjectedLBFGS(),
         max_iterations=10_000,
         gtol=1e-4,
         xtol=1e-4,
         patience=5,
         guard=RegimeGuard(max_halvings=3),
-        max_seconds=max(0.0, clock.budget - clock.elapsed()),
     )
-    t_phase = clock.elapsed()
-    res = optimize(prob, settings, progress=False)
-    wall = clock.elapsed() - t_phase
-    secs = np.array([h["seconds"] for h in res["history"]])
-    ends = t_phase + (wall - secs.sum()) + np.cumsum(secs)
-    for t, h in zip(ends, res["history"]):
-        u = np.asarray(prob.to_unit(np.asarray([h[f"{nm}_SI"] for nm in prob.names])))
-        clock.trace.append((float(t), h["objective_deg"], u.tolist(), h["regime"]))
+    try:
+        res = optimize(search.problem, settings, progress=False, evaluator=ev)
+    finally:  # also when the budget ends the run (Budget raised from an evaluation)
+        info.update(gradient_compile_s=ev.compile_seconds, finished_cpu_s=ev.elapsed(), stop_reason="budget spent")
     info.update(
         iterations=len(res["history"]),
         converged=res["converged"],
+        stop_reason=res["stop_reason"],
         halvings=int(sum(h["halvings"] for h in res["history"])),
         regimes=[h["regime"] for h in res["history"]],
-        leading_multipliers=[h["leading_multiplier"] for h in res["history"]],
-        seconds_per_iteration_median=float(np.median(secs)) if len(secs) else None,
+        seconds=res["seconds"],
     )
 
 
@@ -254,72 +278,43 @@ def checkpoints(trace, budget, fractions=CHECKPOINTS):
     return out
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--budget", type=float, default=500.0, help="wall budget per method, s")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
-    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "design.json")
-    ap.add_argument(
-        "--checkpoints",
-        type=float,
-        nargs="+",
-        default=list(CHECKPOINTS),
-        help="fractions of the budget at which best-so-far designs are scored held-out (the last must be 1)",
-    )
-    args = ap.parse_args(argv)
-    fractions = tuple(sorted(args.checkpoints))
-    if not all(0.0 < f <= 1.0 for f in fractions) or fractions[-1] != 1.0:
-        ap.error(f"--checkpoints: fractions in (0, 1] ending at 1, got {list(args.checkpoints)}")
-
+def run_part(name: str, seed: int, budget: float, methods, path: Path, update: bool = False) -> dict:
+    """Every method of ``methods`` on problem ``name`` with ``seed``, then the held-out
+    scores of their checkpoint designs; written to ``path``. ``update``: ``path`` holds the
+    part already; the methods run again and replace their entries (the others are kept)."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from optim.steady import SteadyEvaluator
+    from _common import machine
+
+    from optim.steady import SteadyEvaluator, forget_programs
 
     tic_all = time.perf_counter()
-    problem = build()
+    problem = build(name)
     start = np.asarray(problem.start_unit(), dtype=float)
     x_start = np.asarray(problem.from_unit(start))
-    print(f"start design (unit box): {np.round(start, 4).tolist()}", flush=True)
-
-    # compile the steady-state solve and the held-out program (untimed)
     t = time.perf_counter()
-    start_value, start_info = SteadyEvaluator(problem).value(x_start)
+    start_value, start_info = SteadyEvaluator(problem).value(x_start)  # compiles the steady-state solve
     compile_s = time.perf_counter() - t
-    study = json.loads((ROOT / "bench" / "results" / "design_study.json").read_text())
-    t = time.perf_counter()
-    SteadyEvaluator(problem).value_and_grad(np.asarray(study["optimum"]["cma_design_SI"]))
-    gradient_compile_s = time.perf_counter() - t
     heldout = heldout_program(problem)
-    t = time.perf_counter()
-    vals, ok = heldout(x_start)
-    start_heldout = float(np.mean(np.asarray(vals)))
-    heldout_first_s = time.perf_counter() - t
-    print(
-        f"start: objective {start_value:.5f} deg ({start_info['regime']}), held-out {start_heldout:.5f} deg; "
-        f"steady compile+solve {compile_s:.0f} s, held-out {heldout_first_s:.0f} s",
-        flush=True,
-    )
+    print(f"{name} seed {seed}: start {start_value:.5f} deg ({start_info['regime']}), {compile_s:.0f} s", flush=True)
 
     runs = {}
-    for name in args.methods:
-        clock = Clock(problem, SteadyEvaluator(problem), args.budget)
+    for method in methods:
+        ev = timed_evaluator(problem, budget)
         info = {}
         try:
-            if name == "ours":
-                run_ours(clock, problem, start, args.seed, info)
+            if method in OURS:
+                forget_programs()  # each of our methods pays its own compilation
+                run_ours(ev, problem, seed, info, adam=method == "ours_adam")
             else:
-                {"cma": run_cma, "tpe": run_tpe, "nelder_mead": run_nelder_mead, "sobol": run_sobol}[name](
-                    clock, problem.n, start, args.seed
-                )
+                {"cma": run_cma, "tpe": run_tpe}[method](ev, problem.n, start, seed)
         except Budget:
             pass
-        runs[name] = (clock.trace, info)
-        best = min((v for _, v, _, _ in clock.trace), default=math.inf)
-        print(f"{name}: {len(clock.trace)} evaluations, best objective {best:.5f} deg", flush=True)
+        runs[method] = (ev.trace, info)
+        best = min((v for _, v, _, _ in ev.trace), default=math.inf)
+        print(f"  {method}: {len(ev.trace)} evaluations in {ev.elapsed():.0f} CPU-s, best {best:.5f} deg", flush=True)
 
-    # held-out scores of the checkpoint designs (cached per design)
     scored = {}
 
     def score(u):
@@ -330,122 +325,202 @@ def main(argv=None):
             scored[key] = (float(np.mean(v)), float(np.std(v)), bool(np.all(np.asarray(ok))))
         return scored[key]
 
-    methods = {}
-    for name, (trace, info) in runs.items():
-        cps = checkpoints(trace, args.budget, fractions)
+    t = time.perf_counter()
+    start_heldout = score(start.tolist())[0]
+    out = {}
+    for method, (trace, info) in runs.items():
+        cps = checkpoints(trace, budget)
         for cp in cps:
-            if cp["unit_design"] is not None:
+            if cp["unit_design"] is None:
+                cp.update(heldout_deg=start_heldout, heldout_std_deg=None, heldout_ok=True)
+            else:
                 m, s, ok = score(cp["unit_design"])
                 cp.update(heldout_deg=m, heldout_std_deg=s, heldout_ok=ok)
-            else:
-                cp.update(heldout_deg=start_heldout, heldout_std_deg=None, heldout_ok=True)
-        methods[name] = {
+        out[method] = {
             "evaluations": len(trace),
             "periodic_evaluations": sum(e[3] == "periodic" for e in trace),
             "best_objective": min((v for _, v, _, _ in trace), default=math.inf),
             "checkpoints": cps,
-            "best_heldout": cps[-1]["heldout_deg"],
             "returned_design_SI": None
             if cps[-1]["unit_design"] is None
             else np.asarray(problem.from_unit(np.asarray(cps[-1]["unit_design"]))).tolist(),
-            "trace": [[t, v, r] for t, v, _, r in trace],
+            "trace": [[t_, v, r] for t_, v, _, r in trace],
             **info,
         }
-        print(f"{name}: held-out at checkpoints {[round(c['heldout_deg'], 5) for c in cps]}", flush=True)
-    best_any = min(min(c["heldout_deg"] for c in m["checkpoints"]) for m in methods.values())
-    target = 1.01 * best_any
-    for m in methods.values():
-        hit = [c["t_s"] for c in m["checkpoints"] if c["heldout_deg"] <= target]
-        m["time_to_1pct_s"] = hit[0] if hit else None
-    free = [methods[k]["time_to_1pct_s"] for k in GRADIENT_FREE if k in methods]
-    free = [t for t in free if t is not None]
-    ours_t = methods.get("ours", {}).get("time_to_1pct_s")
-    speedup = (min(free) / ours_t) if free and ours_t else None
-    # no gradient-free method within 1 % in its budget: it would get there after the budget at the soonest
-    speedup_lower_bound = args.budget / ours_t if ours_t and not free else speedup
-
-    data = {
-        "objective": "steady_state",
-        "command": _command(argv if argv is not None else sys.argv[1:]),
-        "steady_objective": STEADY,
-        "heldout": {**HELDOUT, "metric": "problem value: Eq. 19 + weighted terms + cost, deg"},
-        "budget_s_per_method": args.budget,
-        "checkpoint_fractions": list(fractions),
-        "seeds": [args.seed],
-        "learning_rate": LEARNING_RATE,
+        print(f"  {method}: held-out {[round(c['heldout_deg'], 5) for c in cps]}", flush=True)
+    stroke, rpm = PROBLEMS[name]
+    part = {
+        "problem": name,
+        "stroke_m": stroke,
+        "crank_speed_rpm": rpm,
+        "seed": seed,
+        "budget_cpu_s": budget,
+        "names": list(problem.names),
         "start_unit_design": start.tolist(),
         "start_objective_deg": start_value,
         "start_regime": start_info["regime"],
         "start_heldout_deg": start_heldout,
         "compile_s": compile_s,
-        "gradient_compile_s": gradient_compile_s,
-        "problems": [
-            {
-                "name": "design_9var",
-                "n_variables": problem.n,
-                "names": list(problem.names),
-                "methods": methods,
-                "best_heldout_any_method": best_any,
-                "target_heldout_deg": target,
-                "speedup_vs_best_gradient_free": speedup,
-                "speedup_vs_best_gradient_free_lower_bound": speedup_lower_bound,
-            }
-        ],
-        "machine": {
-            "platform": platform.platform(),
-            "cpus": os.cpu_count(),
-            "cpus_usable": len(os.sched_getaffinity(0)),
-            "load_average": os.getloadavg(),
-        },
+        "heldout_s": time.perf_counter() - t,
+        "heldout_designs": len(scored),
+        "methods": out,
+        "machine": machine(load_average=list(__import__("os").getloadavg())),
         "wall_s": time.perf_counter() - tic_all,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(data, indent=1, default=float))
-    plot(data, args.out.with_suffix(".png"))
-    print(f"speedup vs best gradient-free: {speedup} (lower bound {speedup_lower_bound}); wrote {args.out}", flush=True)
+    if update:  # the earlier part with these methods replaced (its start and held-out truth are the same)
+        earlier = json.loads(path.read_text())
+        earlier["methods"] = {**_renamed(earlier["methods"]), **out}
+        earlier.setdefault("updated", []).append({"methods": list(out), "machine": part["machine"]})
+        part = earlier
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(part, default=float))
+    tmp.replace(path)
+    return part
+
+
+def merge(parts_dir: Path, out: Path) -> dict:
+    """Combine the parts in ``parts_dir`` into ``out`` (module docstring): per problem the
+    best held-out value of any method and seed, the 1 % target, each method's time to it and
+    ours' speedup over the best gradient-free method; ``summary``: the worst and best case."""
+    parts = [json.loads(p.read_text()) for p in sorted(parts_dir.glob("*.json"))]
+    for p in parts:
+        p["methods"] = _renamed(p["methods"])
+    if not parts:
+        raise SystemExit(f"no parts in {parts_dir}: run bench/bench_design.py --problem NAME --seed S first")
+    problems, cases = [], []
+    for name in PROBLEMS:
+        mine = sorted((p for p in parts if p["problem"] == name), key=lambda p: p["seed"])
+        if not mine:
+            continue
+        best = min(c["heldout_deg"] for p in mine for m in p["methods"].values() for c in m["checkpoints"])
+        target = 1.01 * best
+        for p in mine:
+            for m in p["methods"].values():
+                hit = [c["t_s"] for c in m["checkpoints"] if c["heldout_deg"] <= target]
+                m["time_to_1pct_s"] = hit[0] if hit else None
+            free = [p["methods"][k]["time_to_1pct_s"] for k in GRADIENT_FREE if k in p["methods"]]
+            reached = [t for t in free if t is not None]
+            ours = p["methods"].get(DEFAULT, {}).get("time_to_1pct_s")
+            p["speedup_vs_best_gradient_free"] = min(reached) / ours if reached and ours else None
+            # no gradient-free method within 1 % in its budget: it would get there after the budget at the soonest
+            p["speedup_lower_bound"] = p["budget_cpu_s"] / ours if ours and not reached else None
+            speedup = p["speedup_vs_best_gradient_free"] or p["speedup_lower_bound"]
+            cases.append(
+                {
+                    "problem": name,
+                    "seed": p["seed"],
+                    "ours_time_to_1pct_s": ours,
+                    "default": DEFAULT,
+                    **{f"{k}_time_to_1pct_s": p["methods"].get(k, {}).get("time_to_1pct_s") for k in OURS},
+                    "best_gradient_free_time_to_1pct_s": min(reached) if reached else None,
+                    "speedup": speedup,
+                    "speedup_is_lower_bound": p["speedup_lower_bound"] is not None,
+                }
+            )
+        problems.append(
+            {
+                "name": name,
+                "stroke_m": mine[0]["stroke_m"],
+                "crank_speed_rpm": mine[0]["crank_speed_rpm"],
+                "n_variables": len(mine[0]["names"]),
+                "names": mine[0]["names"],
+                "best_heldout_any_method": best,
+                "target_heldout_deg": target,
+                "runs": mine,
+            }
+        )
+    scored = [c for c in cases if c["speedup"] is not None]
+    summary = {
+        "cases": cases,
+        "worst": min(scored, key=lambda c: c["speedup"]) if scored else None,
+        "best": max(scored, key=lambda c: c["speedup"]) if scored else None,
+        "ours_never_within_1pct": [c for c in cases if c["ours_time_to_1pct_s"] is None],
+    }
+    data = {
+        "objective": "steady_state",
+        "command": "python bench/bench_design.py --problem NAME --seed S (each part), then --merge",
+        "steady_objective": STEADY,
+        "heldout": {**HELDOUT, "metric": "problem value: Eq. 19 + weighted terms + cost, deg"},
+        "budget_cpu_s_per_method": parts[0]["budget_cpu_s"],
+        "checkpoint_fractions": list(CHECKPOINTS),
+        "seeds": sorted({p["seed"] for p in parts}),
+        "learning_rate_adam": LEARNING_RATE,
+        "classify_at_most": CLASSIFY,
+        "problems": problems,
+        "summary": summary,
+    }
+    out.write_text(json.dumps(data, indent=1, default=float))
+    plot(data, out.with_suffix(".png"))
     return data
 
 
-def _command(args) -> str:
-    """The command line that reproduces the results (``--out`` left out: it moves them only)."""
-    kept, skip = [], False
-    for a in args:
-        if skip:
-            skip = False
-        elif a == "--out":
-            skip = True
-        elif not a.startswith("--out="):
-            kept.append(a)
-    return " ".join(["python bench/bench_design.py", *kept])
+def _renamed(methods: dict) -> dict:
+    """A part's methods with the first runs' name for projected L-BFGS (``ours``) spelled as now."""
+    return {("ours_lbfgs" if k == "ours" else k): v for k, v in methods.items()}
 
 
 def plot(data, path):
-    """Held-out value of each method's best-so-far design against wall time (solid, the
-    checkpoints), and the objective it optimised (dotted)."""
+    """Per problem, the held-out value of each method's best-so-far design against CPU time
+    (seed 0 solid, seed 1 dashed), and the 1 % target."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    (p,) = data["problems"]
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for i, (name, m) in enumerate(p["methods"].items()):
-        color = f"C{i}"
-        ts = [0.0] + [c["t_s"] for c in m["checkpoints"]]
-        hs = [data["start_heldout_deg"]] + [c["heldout_deg"] for c in m["checkpoints"]]
-        ax.step(ts, hs, where="post", color=color, lw=2, label=f"{name} (held-out)")
-        bsf = best_so_far([(t, v, None, r) for t, v, r in m["trace"]])
-        if bsf:
-            ax.step([b[0] for b in bsf], [b[1] for b in bsf], where="post", color=color, lw=0.8, ls=":")
-    ax.axhline(p["target_heldout_deg"], color="k", lw=0.8, ls="--", label="within 1 % of the best held-out")
-    ax.set_xlabel("wall time, s")
-    ax.set_ylabel("value, deg (solid: held-out long run; dotted: steady-state objective)")
-    ax.set_title(f"{p['name']}: steady-state objective, held-out long runs")
-    ax.set_ylim(top=min(ax.get_ylim()[1], 1.3 * data["start_heldout_deg"]))
-    ax.legend(fontsize=8)
+    problems = data["problems"]
+    cols = 2 if len(problems) > 1 else 1
+    rows = math.ceil(len(problems) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(6.5 * cols, 4.2 * rows), squeeze=False)
+    for ax, prob in zip(axes.flat, problems):
+        for run in prob["runs"]:
+            for name, m in sorted(run["methods"].items(), key=lambda nm: METHODS.index(nm[0])):
+                ts = [0.0] + [c["t_s"] for c in m["checkpoints"]]
+                hs = [run["start_heldout_deg"]] + [c["heldout_deg"] for c in m["checkpoints"]]
+                label = f"{name}" if run["seed"] == data["seeds"][0] else None
+                color = f"C{METHODS.index(name)}"  # one colour per method in every panel
+                ax.step(ts, hs, where="post", color=color, lw=1.6, ls="-" if run["seed"] == 0 else "--", label=label)
+        ax.axhline(prob["target_heldout_deg"], color="k", lw=0.8, ls=":", label="within 1 % of the best")
+        ax.set_xscale("symlog", linthresh=10.0)
+        ax.set_xlim(0.0, data["budget_cpu_s_per_method"])
+        ax.set_xlabel("CPU time, s (one core)")
+        ax.set_ylabel("held-out value, deg")
+        ax.set_title(f"{prob['name']}: stroke {prob['stroke_m'] * 1e3:g} mm, {prob['crank_speed_rpm']:g} rpm")
+        top = max(r["start_heldout_deg"] for r in prob["runs"])
+        ax.set_ylim(0.9 * prob["best_heldout_any_method"], 1.15 * top)
+        ax.legend(fontsize=7)
+    for ax in list(axes.flat)[len(problems) :]:
+        ax.axis("off")
+    fig.suptitle("Held-out value of each method's best design so far (seed 0 solid, seed 1 dashed)")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--problem", nargs="+", default=list(PROBLEMS), choices=list(PROBLEMS))
+    ap.add_argument("--seed", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--budget", type=float, default=240.0, help="CPU budget per method, s")
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
+    ap.add_argument("--parts", type=Path, default=PARTS, help="folder of the per-problem, per-seed results")
+    ap.add_argument("--merge", action="store_true", help="combine the parts into --out and its figure")
+    ap.add_argument("--update", action="store_true", help="rerun --methods in existing parts, keeping the others")
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "design.json")
+    args = ap.parse_args(argv)
+    if args.merge:
+        data = merge(args.parts, args.out)
+        print(json.dumps({k: data["summary"][k] for k in ("worst", "best")}, indent=1, default=float))
+        print(f"wrote {args.out}")
+        return data
+    for name in args.problem:
+        for seed in args.seed:
+            path = args.parts / f"{name}_seed{seed}.json"
+            if path.exists() and not args.update:
+                print(f"{path} exists: kept", flush=True)
+                continue
+            run_part(name, seed, args.budget, args.methods, path, update=args.update and path.exists())
+    return None
 
 
 if __name__ == "__main__":

@@ -1,16 +1,19 @@
 """Does the ideal mechanism's contact margin lead into the periodic regime?
 
-``python bench/contact_margin.py [--design-json bench/results/design.json] [--starts 6]``
+``python bench/contact_margin.py [--design-json bench/results/design_frozen_law.json] [--starts 6]``
 
-The nine-variable design problem of ``bench/bench_design.py`` (its steady-state objective
-settings). :func:`jaxcrank.physics.ideal.contact_margin` is a closed-form property of the
-*ideal* mechanism: how far the loads through B and C stay from zero over a revolution,
-relative to their RMS. No simulation with clearance enters it. Two questions:
+The nine-variable design problem at its preset stroke and crank speed, with the
+steady-state objective settings of ``bench/bench_design.py`` (``STEADY``).
+:func:`jaxcrank.physics.ideal.contact_margin` is a closed-form property of the *ideal*
+mechanism: how far the loads through B and C stay from zero over a revolution, relative to
+their RMS. No simulation with clearance enters it. Two questions:
 
 1. **Does it predict the regime?** Labelled designs: the start and the Sobol points that
-   the head-to-head's ``sobol`` method classified, in its order (the scrambled Sobol
+   an earlier head-to-head's ``sobol`` method classified, in its order (the scrambled Sobol
    sequence of ``--seed`` is regenerated; the regimes are those in the trace of
-   ``--design-json``). Reports the margin's ROC AUC for "periodic" (the probability that a
+   ``--design-json``, by default ``bench/results/design_frozen_law.json``: the single-problem
+   head-to-head measured under the frozen memory law with wall-time budgets, the last one
+   with a ``sobol`` method). Reports the margin's ROC AUC for "periodic" (the probability that a
    periodic design has the larger margin than a not-periodic one; 0.5 is no information)
    and the periodic fraction below and above the median margin.
 2. **Is it a way in?** From the start design and from the first not-periodic Sobol designs
@@ -48,7 +51,8 @@ def auc(pos, neg) -> float:
 
 
 def labelled_designs(design_json: Path, seed: int, n: int):
-    """(unit designs (k, n), regimes) of the head-to-head's sobol method, failed ones dropped."""
+    """(unit designs (k, n), regimes) of the sobol method of an earlier head-to-head (the
+    single-problem schema of ``design_frozen_law.json``), failed ones dropped."""
     from scipy.stats import qmc
 
     data = json.loads(design_json.read_text())
@@ -64,7 +68,7 @@ def labelled_designs(design_json: Path, seed: int, n: int):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--design-json", type=Path, default=ROOT / "bench" / "results" / "design.json")
+    ap.add_argument("--design-json", type=Path, default=ROOT / "bench" / "results" / "design_frozen_law.json")
     ap.add_argument("--seed", type=int, default=0, help="the head-to-head's seed (its Sobol sequence)")
     ap.add_argument("--starts", type=int, default=6)
     ap.add_argument("--lr", type=float, default=0.05)
@@ -79,9 +83,10 @@ def main(argv=None):
 
     from jaxcrank.numerics.steady import SteadyStateError
     from jaxcrank.physics import ideal
-    from optim.steady import SteadyEvaluator
+    from optim.design import design_problem
+    from optim.steady import Steady, SteadyEvaluator
 
-    problem = bench_design.build()
+    problem = design_problem(Steady(**bench_design.STEADY))  # the preset, as in the recorded run
 
     def margin(u):
         return ideal.contact_margin(problem.mechanism(problem.from_unit(u)))

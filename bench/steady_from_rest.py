@@ -10,9 +10,12 @@ the implicit-function-theorem gradient
 (:func:`jaxcrank.numerics.steady.steady_value_and_grad`, unit-box variables).
 
 Candidates: the designs of ``bench/steady_gradient.py``, the unit designs stored in
-``bench/results/design.json`` (every method's checkpoints, the ``ours`` method's classified
-designs) and ``--sobol`` scrambled Sobol points of the unit box (``--seed``), classified in
-one batch (:func:`jaxcrank.runs.regimes.classify`, kernel engine, 20 revolutions from rest);
+``bench/results/design_frozen_law.json`` (the earlier single-problem head-to-head, measured
+under the frozen memory law: every method's checkpoints, the ``ours`` method's classified
+designs; their sources are labelled ``design.json:...``, the file's name when they were
+recorded, so that a rerun resumes the recorded results) and ``--sobol`` scrambled Sobol
+points of the unit box (``--seed``), classified in one batch
+(:func:`jaxcrank.runs.regimes.classify`, kernel engine, 20 revolutions from rest);
 ``steady_state`` (defaults) on the periodic ones gives the period, the Floquet multipliers
 and the neutral entries. Designs whose orbit has no idle approach-speed memory
 (``neutral`` holds only the two works) are evaluated, period 1 first, then by leading
@@ -112,7 +115,7 @@ def candidates(prob, n_sobol, seed, sobol_only=False):
     """(source, unit design) pairs, duplicates removed; ``sobol_only``: the Sobol points alone."""
     lo, hi = np.array(prob.lower), np.array(prob.upper)
     out = [(f"steady_gradient:{name}", (np.asarray(x) - lo) / (hi - lo)) for name, x in gradient_designs().items()]
-    study = json.loads((ROOT / "results" / "design.json").read_text())
+    study = json.loads((ROOT / "results" / "design_frozen_law.json").read_text())
     if sobol_only:
         out, study = [], {"problems": []}
     for problem in study["problems"]:

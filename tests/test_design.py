@@ -233,21 +233,37 @@ def test_bench_best_so_far_and_checkpoints():
 @pytest.mark.long
 @pytest.mark.slow
 def test_bench_design_writes_the_schema(tmp_path):
-    """A short run of bench_design (5 s budgets, two methods): design.json has the keys
-    the head-to-head documents, every checkpoint has a held-out value, and the plot is written."""
+    """A short part of bench_design (5 CPU-s budgets, ours and CMA-ES on the preset problem,
+    seed 0), then the merge: design.json has the keys the head-to-head documents, every
+    checkpoint has a held-out value, the summary has the case, and the plot is written."""
     import json
 
     B = _bench()
-    out = tmp_path / "design.json"
-    B.main(["--budget", "5", "--methods", "ours", "sobol", "--out", str(out)])
+    parts, out = tmp_path / "parts", tmp_path / "design.json"
+    B.main(["--parts", str(parts), "--problem", "preset", "--seed", "0", "--budget", "5", "--methods", "ours", "cma"])
+    assert (parts / "preset_seed0.json").exists()
+    B.main(["--merge", "--parts", str(parts), "--out", str(out)])
     data = json.loads(out.read_text())
     assert data["objective"] == "steady_state" and data["heldout"]["revolutions"] >= 20
+    assert data["budget_cpu_s_per_method"] == 5.0 and data["seeds"] == [0]
     (p,) = data["problems"]
-    assert p["name"] == "design_9var" and p["n_variables"] == 9
-    assert set(p["methods"]) == {"ours", "sobol"} and "speedup_vs_best_gradient_free" in p
-    for m in p["methods"].values():
-        assert {"best_heldout", "time_to_1pct_s", "checkpoints", "evaluations"} <= set(m)
+    assert p["name"] == "preset" and p["n_variables"] == 9 and len(p["names"]) == 9
+    assert p["target_heldout_deg"] == pytest.approx(1.01 * p["best_heldout_any_method"])
+    (run,) = p["runs"]
+    assert run["seed"] == 0 and run["problem"] == "preset" and run["budget_cpu_s"] == 5.0
+    assert {"start_regime", "start_heldout_deg", "compile_s", "machine"} <= set(run)
+    assert "speedup_vs_best_gradient_free" in run and "speedup_lower_bound" in run
+    assert set(run["methods"]) == {"ours", "cma"}
+    for m in run["methods"].values():
+        assert {"evaluations", "periodic_evaluations", "best_objective", "time_to_1pct_s", "trace"} <= set(m)
+        assert len(m["checkpoints"]) == len(data["checkpoint_fractions"])
         assert all(np.isfinite(c["heldout_deg"]) for c in m["checkpoints"])
+    (case,) = data["summary"]["cases"]
+    assert (case["problem"], case["seed"]) == ("preset", 0)
+    assert {"ours_time_to_1pct_s", "best_gradient_free_time_to_1pct_s", "speedup", "speedup_is_lower_bound"} <= set(
+        case
+    )
+    assert {"worst", "best", "ours_never_within_1pct"} <= set(data["summary"])
     assert out.with_suffix(".png").exists()
 
 
@@ -432,9 +448,8 @@ def test_four_bar_problem_takes_a_steady_state_step_from_the_cli(tmp_path):
     history = list(csv_rows(out / "history.csv"))
     xs = np.array([[float(h[f"{n}_SI"]) for n in prob.names] for h in history])
     assert prob.feasible(xs).all() and not np.allclose(xs[0], xs[1])
-    # the preset's periodic orbit (period 1) with a finite, nonzero exact gradient; after Adam's
-    # first step (0.1 of the box in every variable) the motion from rest is periodic too (the
-    # warm-started shooting meets an unstable orbit there: the evaluator classifies it from rest)
+    # the preset's periodic orbit (period 1) with a finite, nonzero exact gradient; every iterate
+    # is periodic (the command keeps steps inside the periodic regime with the regime guard)
     for h in history:
         grad = np.array([float(h[f"grad_{n}_deg_per_SI"]) for n in prob.names])
         assert h["regime"] == "periodic" and np.isfinite(float(h["objective_deg"]))
@@ -451,3 +466,32 @@ def csv_rows(path):
 
     with open(path, newline="") as f:
         yield from csv.DictReader(f)
+
+
+@pytest.mark.slow  # steady-state solves and the gradient program of the lubricated four-bar (minutes on 2 cores)
+def test_the_four_bar_problem_optimises_a_lubricated_base_from_the_cli(tmp_path):
+    """``jaxcrank optimize --problem four-bar`` on the lubricated four-bar (its config's
+    ``[mechanism]``): a periodic start, two periodic iterates with a finite, nonzero exact
+    gradient, and a final mechanism whose pins are still lubricated."""
+    import json
+
+    from jaxcrank.physics import catalogue
+    from jaxcrank.runs import config
+    from jaxcrank.runs.cli import main
+    from optim.four_bar import four_bar_problem
+
+    cfg = tmp_path / "lubricated.toml"
+    cfg.write_text(tomli_w.dumps({"problem": "four-bar", "mechanism": config.to_dict(catalogue.four_bar_lubricated())}))
+    out = tmp_path / "run"
+    args = ["optimize", "--config", str(cfg), "--iterations", "2", "--out", str(out), "--no-cache", "--quiet"]
+    assert main(args) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["iterations"] == 2 and result["start_search"]["periodic"]
+    prob = four_bar_problem()
+    history = list(csv_rows(out / "history.csv"))
+    for h in history:
+        grad = np.array([float(h[f"grad_{n}_deg_per_SI"]) for n in prob.names])
+        assert h["regime"] == "periodic" and np.isfinite(float(h["objective_deg"]))
+        assert np.all(np.isfinite(grad)) and np.any(grad != 0.0)
+    joints = result["final_mechanism"]["joints"]
+    assert joints["B"]["law"] == joints["C"]["law"] == "lubricated" and joints["C"]["viscosity"] == 0.4
