@@ -160,6 +160,11 @@ def family(d) -> list[str]:
     return lines
 
 
+def _order(method: str) -> int:
+    """Where a method comes in tables and lists: as in `LABEL`, unknown ones last."""
+    return list(LABEL).index(method) if method in LABEL else len(LABEL)
+
+
 def run_table(run) -> list[str]:
     """One part (problem and seed): each method's evaluations, objective, held-out value, time to 1 %."""
     lines = [
@@ -167,7 +172,7 @@ def run_table(run) -> list[str]:
         "checkpoint (deg) | time to 1 % (CPU s) |",
         "|---|---|---|---|---|",
     ]
-    for k, m in run["methods"].items():
+    for k, m in sorted(run["methods"].items(), key=lambda km: _order(km[0])):
         lines.append(
             f"| {_label(k)} | {m['evaluations']} ({m['periodic_evaluations']}) | {_deg(m['best_objective'])} | "
             f"{_final_heldout(m)} | {_t(m.get('time_to_1pct_s'))} |"
@@ -405,7 +410,7 @@ def head_to_head(d) -> list[str]:
     loads = [r["machine"]["load_average"][0] for r in runs if r["machine"].get("load_average")]
     compiles = [r["compile_s"] for r in runs]
     fr = d["checkpoint_fractions"]
-    methods = _distinct(k for r in runs for k in r["methods"])
+    methods = sorted(_distinct(k for r in runs for k in r["methods"]), key=_order)
     lines = [
         "## Head-to-head on the steady state, judged on held-out long runs",
         "",
