@@ -236,15 +236,16 @@ def optimize(
                 f"{ckpt}: the optimiser state does not fit {opt.label} ({err}); the checkpoint is corrupted"
             ) from None
         quiet, converged, stop = meta["quiet"], meta["converged"], meta.get("stop_reason")
+        start_seconds = 0.0  # the start was evaluated by the run that made the checkpoint
     else:
-        tic = time.perf_counter()
+        start_tic = time.perf_counter()
         u = problem.start_unit()
         # the objective at the start (degrees) scales the rest; its evaluation is iteration 0's
         first = _checked(problem, u, *vg(u, 1.0))
         f0 = float(first[0])
         first = (first[0] / f0, first[1] / f0)
         state, history, quiet, converged, stop = opt.init(u), [], 0, None, None
-    start_seconds = 0.0 if resume else time.perf_counter() - tic
+        start_seconds = time.perf_counter() - start_tic
 
     search = isinstance(opt, AbstractLineSearchOptimizer)
     trial = qn.trial_function(problem, vg, f0, settings.guard, evaluator)
