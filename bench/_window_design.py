@@ -11,15 +11,16 @@ FIVE = ("rod_length", "min_transmission_angle", "clearance_B", "clearance_C", "f
 
 
 def build(name: str, objective: dict):
-    """``paper_2var``, ``design_5var`` or ``design_9var`` with the ensemble objective ``objective``."""
+    """``paper_2var``, ``design_5var`` or ``design_9var`` with the ensemble objective of the
+    ``[objective]`` keys ``objective``."""
     import jax
 
     jax.config.update("jax_enable_x64", True)
     from optim.design import design_problem
-    from optim.objective import Ensemble
+    from optim.objective import objective_from_config
     from optim.presets import paper_problem
 
-    obj = Ensemble(**objective)
+    obj = objective_from_config({"method": "ensemble", **objective})
     if name.startswith("paper"):
         return paper_problem(obj)
     if name == "design_5var":

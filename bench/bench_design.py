@@ -70,7 +70,7 @@ STEADY = dict(
     batch_revolutions=2,
     samples_per_revolution=360,
     max_steps=300_000,
-)
+)  # the [objective] keys (flat) of a method="steady_state" table
 #: the family: name -> (target stroke, m; crank speed, rpm)
 PROBLEMS = {
     "preset": (0.240, 600.0),
@@ -108,10 +108,10 @@ def build(name: str):
     import equinox as eqx
 
     from optim.design import design_problem
-    from optim.steady import Steady
+    from optim.objective import objective_from_config
 
     stroke, rpm = PROBLEMS[name]
-    problem = design_problem(Steady(**STEADY))
+    problem = design_problem(objective_from_config({"method": "steady_state", **STEADY}))
     base = eqx.tree_at(lambda m: m.driver.speed, problem.base, rpm * 2.0 * math.pi / 60.0)
     title = f"design: {problem.n} variables, stroke {stroke * 1e3:g} mm, {rpm:g} rpm"
     return dataclasses.replace(problem, base=base, stroke=stroke, title=title)
@@ -142,7 +142,15 @@ def heldout_program(problem, heldout=HELDOUT):
         ts = jnp.linspace(0.0, revs * period, revs * per_rev + 1)
         # between samples: no rounding decides which samples are in the statistics
         start = (revs - last) * period + 0.5 * period / per_rev
-        sim = jc.simulate(mech, ts=ts, y0=y0, metrics_start=start, save_ts=ts[-1:], max_steps=5_000_000, throw=False)
+        sim = jc.simulate(
+            mech,
+            ts=ts,
+            y0=y0,
+            metrics_start=start,
+            save_ts=ts[-1:],
+            options=jc.SolveOptions(max_steps=5_000_000),
+            throw=False,
+        )
         value = problem.loss(sim.metrics) + problem.cost(x)
         return jnp.where(sim.ok, value, jnp.nan), sim.ok
 

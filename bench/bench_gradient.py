@@ -44,7 +44,7 @@ settings = json.loads(sys.argv[2])
 import numpy as np
 from jaxcrank import cache
 cache.enable(sys.argv[3])
-from optim.objective import Ensemble
+from optim.ensemble import Ensemble
 from optim.optimize import programs
 from optim.presets import paper_problem
 import dataclasses

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from optim import search
-from optim.objective import Ensemble
+from optim.ensemble import Ensemble
 from optim.optimize import Settings, optimize
 from optim.optimizers import adam
 from optim.presets import paper_problem

@@ -30,7 +30,7 @@ import numpy as np
 from _common import machine
 
 from jaxcrank.numerics.kernel import engine as kernel_engine
-from jaxcrank.numerics.steady import steady_state
+from jaxcrank.numerics.steady import SteadyOptions, steady_state
 from jaxcrank.physics.parameters import get_parameter, set_parameters
 from jaxcrank.runs import regimes
 from optim.design import design_problem
@@ -81,8 +81,7 @@ def bench_grid(base, points, xla):
         t = time.perf_counter()
         s = steady_state(
             set_parameters(base, NAMES, [float(v) for v in x]),
-            statistics_revolutions=4,
-            samples_per_revolution=360,
+            SteadyOptions(statistics_revolutions=4, samples_per_revolution=360),
             throw=False,
         )
         per_design.append(time.perf_counter() - t)

@@ -42,8 +42,16 @@ from jaxcrank import model, outputs, solve
 def jax_run(mech, t1, solver, tol, n_samples):
     ts = jnp.linspace(0.0, t1, n_samples)
     # the first call compiles; the second is timed as the run
-    sim, first = timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
-    sim, wall = timed(lambda: solve.simulate(mech, ts=ts, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000))
+    sim, first = timed(
+        lambda: solve.simulate(
+            mech, ts=ts, options=jc.SolveOptions.from_text(solver, rtol=tol, atol=tol, max_steps=5_000_000)
+        )
+    )
+    sim, wall = timed(
+        lambda: solve.simulate(
+            mech, ts=ts, options=jc.SolveOptions.from_text(solver, rtol=tol, atol=tol, max_steps=5_000_000)
+        )
+    )
     return {
         "solver": solver,
         "wall_s": wall,
@@ -82,7 +90,7 @@ def scipy_run(mech, t1, method, tol, n_samples):
 
 def _steps(mech, l1, l2, ts, tol):
     m = eqx.tree_at(lambda x: (x.crank_length, x.rod_length), mech, (l1, l2))
-    sim = solve.simulate(m, ts=ts, rtol=tol, atol=tol, max_steps=1_000_000)
+    sim = solve.simulate(m, ts=ts, options=jc.SolveOptions(rtol=tol, atol=tol, max_steps=1_000_000))
     return sim.num_steps + sim.num_rejected
 
 
@@ -104,7 +112,9 @@ def gradient_timing(mech, t1, tol):
 
     def objective(l1, l2, adjoint=None):
         m = eqx.tree_at(lambda x: (x.crank_length, x.rod_length), mech, (l1, l2))
-        sim = solve.simulate(m, ts=ts, rtol=tol, atol=tol, max_steps=1_000_000, adjoint=adjoint)
+        sim = solve.simulate(
+            m, ts=ts, options=jc.SolveOptions(rtol=tol, atol=tol, max_steps=1_000_000), adjoint=adjoint
+        )
         return outputs.rms_transmission_error(sim, t_start=0.0)
 
     args = (jnp.asarray(mech.crank_length), jnp.asarray(mech.rod_length))

@@ -84,9 +84,12 @@ def main(argv=None):
     from jaxcrank.numerics.steady import SteadyStateError
     from jaxcrank.physics import ideal
     from optim.design import design_problem
-    from optim.steady import Steady, SteadyEvaluator
+    from optim.objective import objective_from_config
+    from optim.steady import SteadyEvaluator
 
-    problem = design_problem(Steady(**bench_design.STEADY))  # the preset, as in the recorded run
+    problem = design_problem(
+        objective_from_config({"method": "steady_state", **bench_design.STEADY})
+    )  # the preset, as in the recorded run
 
     def margin(u):
         return ideal.contact_margin(problem.mechanism(problem.from_unit(u)))

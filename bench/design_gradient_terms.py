@@ -4,7 +4,7 @@
 
 At projected Adam's best design of ``bench/results/design_study.json`` (nine
 variables, the benchmark's window): each :data:`optim.design.TERMS` entry's
-ensemble gradient (:class:`optim.objective.Ensemble` in reverse mode) against
+ensemble gradient (:class:`optim.ensemble.Ensemble` in reverse mode) against
 secant slopes of the same term from the forward solve over +-delta along every
 scaled coordinate (clipped to the box), in term units per unit of the scaled variable.
 """

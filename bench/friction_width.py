@@ -74,7 +74,9 @@ def main():
     rows = []
     for v1 in [1e-3, 1e-2, 5e-2]:
         mech = _ramp(1e-4, v1)
-        run = lambda mech=mech: jc.simulate(mech, args.t1, n_samples=int(args.t1 * 10000) + 1, max_steps=5_000_000)  # noqa: E731
+        run = lambda mech=mech: jc.simulate(
+            mech, args.t1, n_samples=int(args.t1 * 10000) + 1, options=jc.SolveOptions(max_steps=5_000_000)
+        )  # noqa: E731
         jax.block_until_ready(run().ys)
         start = time.perf_counter()
         sim = run()

@@ -189,7 +189,7 @@ def from_rest(mech, revolutions, k):
         metrics_start=revolutions * T,
         save_samples=False,
         save_ts=jnp.array([revolutions * T]),
-        **TOL,
+        options=jc.SolveOptions(**TOL),
     )
     return np.asarray(sim.ys[0]), float(sim.metrics[KEY])
 
@@ -197,7 +197,9 @@ def from_rest(mech, revolutions, k):
 def continued_section(centre_mech, y, mech, revolutions):
     """Section state of ``mech`` after ``revolutions`` continued from the centre's state ``y``."""
     y0 = carry_state(centre_mech, jnp.asarray(y), mech).at[-2:].set(0.0)
-    sim = jc.simulate(mech, ts=jnp.array([0.0, revolutions * float(mech.period)]), y0=y0, **TOL)
+    sim = jc.simulate(
+        mech, ts=jnp.array([0.0, revolutions * float(mech.period)]), y0=y0, options=jc.SolveOptions(**TOL)
+    )
     return np.asarray(sim.ys[-1])
 
 

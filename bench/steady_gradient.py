@@ -66,9 +66,7 @@ def _tracked(mech, revolutions, y0=None, k=1):
         y0=y0,
         metrics_start=revolutions * period,
         save_samples=False,
-        rtol=1e-10,
-        atol=1e-10,
-        max_steps=10_000_000,
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000),
     )
     return float(sim.metrics[KEY])
 
@@ -130,9 +128,7 @@ def main():
         settled = jc.simulate(
             centre_mech,
             ts=jnp.arange(args.revolutions + 1) * float(centre_mech.period),
-            rtol=1e-10,
-            atol=1e-10,
-            max_steps=10_000_000,
+            options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000),
         ).ys[-1]
 
         k = steady.period_revolutions

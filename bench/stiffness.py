@@ -154,15 +154,17 @@ def main(argv=None):
     out["solver_steps"] = []
     for label, m in (("friction on", mech), ("friction off", set_parameter(mech, "friction.coefficient", 0.0))):
         for name, solver in (
-            ("tsit5", "tsit5"),
-            ("rodas4", "rodas4"),
-            ("kvaerno5", "kvaerno5"),
+            ("tsit5", solve.solver_from_name("tsit5")),
+            ("rodas4", solve.solver_from_name("rodas4")),
+            ("kvaerno5", solve.solver_from_name("kvaerno5")),
             (
                 "kvaerno5, full Newton (Jacobian every iteration)",
                 diffrax.Kvaerno5(root_finder=optx.Newton(rtol=1e-6, atol=1e-6)),
             ),
         ):
-            sim = solve.simulate(m, args.window, n_samples=11, solver=solver, max_steps=1_000_000)
+            sim = solve.simulate(
+                m, args.window, n_samples=11, options=jc.SolveOptions(solver=solver, max_steps=1_000_000)
+            )
             out["solver_steps"].append(
                 {
                     "friction": label,

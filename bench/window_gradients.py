@@ -23,10 +23,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxcrank import simulate
+from jaxcrank import SolveOptions, simulate
 from jaxcrank.analysis.outputs import transmission_angle_error
-from optim import windows as W
-from optim.objective import EQ19, Ensemble
+from optim import ensemble as W
+from optim.ensemble import Ensemble
+from optim.objective import EQ19
 from optim.presets import paper_problem
 
 
@@ -46,7 +47,7 @@ def main(argv=None):
         if old["design_m"] == args.design and old["window_s"] == args.window:
             report["solvers"] = old["solvers"]
     for solver in args.solvers:
-        obj = Ensemble(window=args.window, windows=0, window_solver=solver, window_max_steps=50_000)
+        obj = Ensemble(window=args.window, windows=0, window_options=SolveOptions.from_text(solver, max_steps=50_000))
         prob = paper_problem(obj)
         mech = prob.mechanism(x0)
         exact, starts = obj.reference(mech)
@@ -60,10 +61,7 @@ def main(argv=None):
                 m,
                 ts=ts,
                 y0=W.start_state(m, starts, i),
-                solver=solver,
-                rtol=tol,
-                atol=tol,
-                max_steps=200_000,
+                options=SolveOptions.from_text(solver, rtol=tol, atol=tol, max_steps=200_000),
                 throw=False,
             )
             return jnp.sum(transmission_angle_error(m, sim.ts[1:], sim.ys[1:]) ** 2)

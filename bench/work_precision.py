@@ -32,7 +32,9 @@ def paper_run(mech, t1, solver, tol):
     """(trajectory columns, wall time after compilation, compile time, accepted, rejected)."""
 
     def go():
-        return solve.simulate(mech, t1, solver=solver, rtol=tol, atol=tol, max_steps=5_000_000)
+        return solve.simulate(
+            mech, t1, options=jc.SolveOptions.from_text(solver, rtol=tol, atol=tol, max_steps=5_000_000)
+        )
 
     _, first = timed(go)  # compiles
     sim, wall = timed(go)

@@ -7,7 +7,8 @@ importing only from the ones before it:
   ``memory``, ``params``, ``parameters``), its structure (``topology``, ``closure``) and
   the model (``state``, ``kinematics``, ``dynamics``, ``frame``, ``signals``, re-exported by
   ``model``; ``ideal``, ``reference``);
-- ``jaxcrank.numerics``: ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``, ``steady``;
+- ``jaxcrank.numerics``: ``results``, ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``,
+  ``steady``;
 - ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
   ``analysis.validation`` (``wall_impact``, ``memory_audit``);
 - ``jaxcrank.runs``: ``sweep``, ``engines``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``,
@@ -34,6 +35,8 @@ jax.config.update("jax_enable_x64", True)
 from .analysis import metrics, outputs  # noqa: E402
 from .errors import CorruptFileError  # noqa: E402
 from .numerics import solve  # noqa: E402
+from .numerics.results import RESULTS, Regime  # noqa: E402
+from .numerics.shooting import SteadyOptions  # noqa: E402
 from .numerics.solve import (  # noqa: E402
     DEFAULTS,
     SOLVERS,
@@ -105,6 +108,7 @@ __all__ = [
     "JOINT_LAWS",
     "MEMORY_LAWS",
     "PRESETS",
+    "RESULTS",
     "SOLVERS",
     "AbstractMechanism",
     "Body",
@@ -124,6 +128,7 @@ __all__ = [
     "Point",
     "Pose",
     "Prismatic",
+    "Regime",
     "Revolute",
     "Site",
     "SliderCrank",
@@ -139,6 +144,7 @@ __all__ = [
     "Simulation",
     "SimulationError",
     "SolveOptions",
+    "SteadyOptions",
     "SteadyState",
     "SteadyStateError",
     "config",

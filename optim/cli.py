@@ -54,7 +54,7 @@ from jaxcrank import cache
 from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
 
-from .objective import AbstractObjective, Ensemble, Pathwise
+from .objective import objective_config, objective_from_config
 from .optimize import Settings, optimize
 from .optimizers import OPTIMIZERS, from_settings
 from .presets import PROBLEMS, paper_reference
@@ -204,51 +204,6 @@ def build(cfg) -> tuple[Problem, Settings]:
     # steps kept inside the periodic regime, where the gradient is exact
     section = section if "method" in section else {**STEADY_OPTIMIZER, **section}
     return problem, dataclasses.replace(settings_from_config(section), guard=RegimeGuard())
-
-
-def objective_from_config(section: dict) -> AbstractObjective:
-    """The objective of an ``[objective]`` table: ``method`` ("ensemble" by default,
-    "pathwise" or "steady_state") and the fields of that class; ``window_gradient``
-    ("forward" or "reverse") picks an ensemble's window adjoint, ``on_failure``
-    ("raise" or "nan") its ``throw``."""
-    import diffrax
-
-    values = dict(section)
-    kind = values.pop("method", "ensemble")
-    if kind not in ("ensemble", "pathwise", "steady_state"):
-        raise ParameterError(f"objective method {kind!r} is unknown; valid: 'ensemble', 'pathwise', 'steady_state'")
-    if "on_failure" in values:
-        mode = values.pop("on_failure")
-        if mode not in ("raise", "nan"):
-            raise ParameterError(f"objective on_failure {mode!r} is unknown; valid: 'raise', 'nan'")
-        values["throw"] = mode == "raise"
-    if kind == "steady_state":
-        from .steady import Steady
-
-        if isinstance(values.get("trend"), dict):
-            values["trend"] = objective_from_config(values["trend"])
-        return Steady(**_fields(Steady, "objective", values))
-    if "window_gradient" in values:
-        mode = values.pop("window_gradient")
-        adjoints = {"forward": diffrax.ForwardMode(), "reverse": diffrax.RecursiveCheckpointAdjoint()}
-        if mode not in adjoints:
-            raise ParameterError(f"objective window_gradient {mode!r} is unknown; valid: 'forward', 'reverse'")
-        values["window_adjoint"] = adjoints[mode]
-    kinds = {"ensemble": Ensemble, "pathwise": Pathwise}
-    return kinds[kind](**_fields(kinds[kind], "objective", values))
-
-
-def objective_config(objective: AbstractObjective) -> dict:
-    """The ``[objective]`` table of ``objective`` ([`objective_from_config`][optim.cli.objective_from_config] reads it
-    back)."""
-    d = objective.describe()
-    out = {"method": d.pop("kind")}
-    if "window_adjoint" in d:
-        out["window_gradient"] = d.pop("window_adjoint")
-    out["on_failure"] = "raise" if d.pop("throw") else "nan"
-    if "trend" in d:  # the steady-state objective's trend estimate: an [objective.trend] table
-        d["trend"] = None if objective.trend is None else objective_config(objective.trend)
-    return {**out, **d}
 
 
 def settings_from_config(section: dict) -> Settings:

@@ -59,7 +59,7 @@ from jaxcrank.physics.presets import FourBar, four_bar
 
 from .objective import EQ19, AbstractObjective
 from .problem import AbstractProblem, known_parameter
-from .steady import Steady
+from .steady import STEADY_OBJECTIVE, Steady
 
 #: the geometry's variables (name -> SI unit); crank and ground lengths follow from them
 GEOMETRY = {
@@ -281,7 +281,9 @@ def four_bar_problem(
         lower=tuple(v[1] for v in FOUR_BAR_VARIABLES),
         upper=tuple(v[2] for v in FOUR_BAR_VARIABLES),
         start=None if start is None else tuple(start),
-        objective=Steady(settle_revolutions=FOUR_BAR_SETTLE) if objective is None else objective,
+        objective=Steady(options=STEADY_OBJECTIVE.replace(settle_revolutions=FOUR_BAR_SETTLE))
+        if objective is None
+        else objective,
         title=f"four-bar: RMS transmission-angle error over the link lengths, transmission in "
         f"[{min_transmission_deg:g}, {180 - min_transmission_deg:g}] deg",
         min_transmission_deg=min_transmission_deg,

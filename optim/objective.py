@@ -12,9 +12,9 @@ and decides how their gradient is taken. A problem ([`optim.problem`][]) combine
     solve (reverse mode). Meaningful only for windows shorter than the impact chaos'
     horizon (a few ms on the paper preset): over the paper's window the gradient is
     ~1e27 (docs/numerics.md, "Gradients beyond the first impacts").
-[`Ensemble`][optim.objective.Ensemble]
+[`optim.ensemble.Ensemble`][]
     The exact metrics of one forward solve over the window, with the
-    ensemble-sensitivity gradient ([`optim.windows`][]): a trend estimate, finite on
+    ensemble-sensitivity gradient ([`optim.ensemble`][]): a trend estimate, finite on
     chaotic runs. Differentiated in forward mode by default (``window_adjoint =
     diffrax.ForwardMode()``, one tangent per design variable), which compiles several
     times faster than reverse mode for the few variables of a design problem; such an
@@ -32,20 +32,21 @@ the same crank angle).
 from __future__ import annotations
 
 import abc
+import dataclasses
+import math
+from typing import NamedTuple
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
-from jaxcrank.numerics.estimators import straight_through
-from jaxcrank.numerics.solve import DEFAULTS
+from jaxcrank.numerics.solve import DEFAULTS, Simulation, SolveOptions, simulate, solver_from_name
+from jaxcrank.physics import model, signals
 from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
+from jaxcrank.physics.linkage import ConstantSpeed
 from jaxcrank.physics.params import ParameterError
-from jaxcrank.physics.signals import rms_metrics
-
-from . import windows as W
 
 #: the paper's Eq. 19 metric (degrees)
 EQ19 = "rms_transmission_angle_error_deg"
@@ -95,9 +96,109 @@ def _check_window(t_start, t_end, samples_per_degree):
 
 
 def _fields(obj) -> dict:
-    import dataclasses
+    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj) if not f.name.endswith("options")}
 
-    return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+
+#: the flat keys of a ``SolveOptions`` in an ``[objective]`` table
+SOLVE_KEYS = ("solver", "rtol", "atol", "dt0", "max_steps")
+
+
+def options_from_fields(values: dict, base: SolveOptions, prefix: str = "") -> SolveOptions:
+    """``base`` changed by the flat keys ``prefix + SOLVE_KEYS`` of ``values``, which are
+    popped (the inverse of [`options_fields`][optim.objective.options_fields]; the solver by name).
+
+    Raises:
+        ParameterError: for an unknown solver name or a setting out of its range."""
+    changes = {k: values.pop(prefix + k) for k in SOLVE_KEYS if prefix + k in values}
+    solver = changes.pop("solver", None)
+    return base.replace(solver=None if solver is None else solver_from_name(solver), **changes)
+
+
+def options_fields(options: SolveOptions, prefix: str = "") -> dict:
+    """``options`` as plain values (the solver by name), each key prefixed: the flat keys
+    of an ``[objective]`` table."""
+    return {
+        f"{prefix}solver": options.solver_name,
+        f"{prefix}rtol": options.rtol,
+        f"{prefix}atol": options.atol,
+        f"{prefix}dt0": options.dt0,
+        f"{prefix}max_steps": options.max_steps,
+    }
+
+
+class Grid(NamedTuple):
+    """The sample grid of an evaluation window ``(t_start, t_end]`` at equal crank-angle steps.
+
+    Attributes:
+        n_start: sample index of t_start.
+        n_eval: number of samples in (t_start, t_end].
+        n_window: samples per ensemble window (a divisor of ``n_eval``).
+        dt: the sample step, s.
+    """
+
+    n_start: int
+    n_eval: int
+    n_window: int
+    dt: float
+
+
+def sample_grid(
+    mech: Mechanism, t_start: float, t_end: float, samples_per_degree: float, window: float | None = None
+) -> Grid:
+    """The [`Grid`][optim.objective.Grid] of the window ``(t_start, t_end]`` (s) with ``samples_per_degree``
+    samples per degree of the driven body's angle; ``window`` (s) is the ensemble windows' length,
+    rounded to whole sample steps and shrunk to divide the evaluation window.
+
+    Raises:
+        ParameterError: the driver is not a [`jaxcrank.ConstantSpeed`][jaxcrank.physics.linkage.ConstantSpeed]
+            (equal times are equal driver angles only at constant speed), or ``mech.driver.speed``
+            is not concrete (a traced design variable).
+    """
+    if not isinstance(mech.driver, ConstantSpeed):
+        raise ParameterError(
+            f"the windowed objectives sample at equal driver angles and need a constant-speed driver "
+            f"(jaxcrank.ConstantSpeed), not {type(mech.driver).__name__}; use the steady-state objective"
+        )
+    try:
+        omega = float(mech.driver.speed)
+    except (TypeError, jax.errors.ConcretizationTypeError):
+        raise ParameterError(
+            "the objective's sample grid needs a concrete driver.speed: build the "
+            "mechanism inside the traced function from a fixed base design"
+        ) from None
+    dt = math.radians(1.0 / samples_per_degree) / omega
+    n_start = int(round(t_start / dt))
+    n_eval = int(round((t_end - t_start) / dt))
+    n_window = n_eval if window is None else max(1, int(round(window / dt)))
+    if n_eval % n_window:
+        # shrink the window to the nearest divisor of the evaluation window
+        k = max(1, round(n_eval / n_window))
+        while n_eval % k:
+            k += 1
+        n_window = n_eval // k
+    return Grid(n_start, n_eval, n_window, dt)
+
+
+def rms_signal_values(mech: Mechanism, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> dict:
+    """The per-sample signals behind the mechanism's RMS metrics
+    ([`jaxcrank.physics.signals.rms_metrics`][]) at sample times ``ts`` (s) with scaled states
+    ``ys``: RMS metric name -> (n,) signal in the metric's unit (deg, m, N m, N)."""
+    definitions = signals.metric_definitions(mech)
+    names = signals.rms_metrics(mech)
+
+    def one(t, y):
+        sig = signals.signals(mech, model.evaluate(mech, t, y))
+        return {name: sig[definitions[name].signal] for name in names}
+
+    return jax.vmap(one)(jnp.asarray(ts), jnp.asarray(ys))
+
+
+def stored_solve(mech: Mechanism, grid: Grid, options: SolveOptions, throw: bool) -> tuple[Simulation, int]:
+    """One solve with ``options`` from the pins-centred start that stores every sample of
+    ``grid``: the simulation and the sample index of t_start (the samples in (t_start,
+    t_end] follow it). Differentiable in reverse mode."""
+    ts = grid.dt * jnp.arange(grid.n_start + grid.n_eval + 1, dtype=float)
+    return simulate(mech, ts=ts, throw=throw, options=options), grid.n_start
 
 
 class Pathwise(AbstractObjective):
@@ -108,9 +209,7 @@ class Pathwise(AbstractObjective):
         t_start: start of the evaluation window (t_start, t_end], s, >= 0.
         t_end: end of the evaluation window, s, > t_start.
         samples_per_degree: samples per degree of crank angle, > 0.
-        rtol: relative solver tolerance on the scaled state, > 0.
-        atol: absolute solver tolerance on the scaled state (scaled units), > 0.
-        max_steps: step budget of the solve.
+        options: the solve's settings ([`jaxcrank.SolveOptions`][jaxcrank.numerics.solve.SolveOptions]).
         throw: see [`AbstractObjective`][optim.objective.AbstractObjective].
 
     Raises:
@@ -120,28 +219,25 @@ class Pathwise(AbstractObjective):
     t_start: float = eqx.field(static=True, default=0.1)
     t_end: float = eqx.field(static=True, default=0.3)
     samples_per_degree: float = eqx.field(static=True, default=10.0)
-    rtol: float = eqx.field(static=True, default=DEFAULTS.rtol)
-    atol: float = eqx.field(static=True, default=DEFAULTS.atol)
-    max_steps: int = eqx.field(static=True, default=DEFAULTS.max_steps)
+    options: SolveOptions = eqx.field(static=True, default=DEFAULTS)
     throw: bool = eqx.field(static=True, default=True)
 
     def __check_init__(self):
         _check_window(self.t_start, self.t_end, self.samples_per_degree)
 
-    def grid(self, mech: Mechanism) -> W.Grid:
-        """The sample grid ([`optim.windows.sample_grid`][])."""
-        return W.sample_grid(mech, self.t_start, self.t_end, self.samples_per_degree)
+    def grid(self, mech: Mechanism) -> Grid:
+        """The sample grid ([`sample_grid`][optim.objective.sample_grid])."""
+        return sample_grid(mech, self.t_start, self.t_end, self.samples_per_degree)
 
     def solve(self, mech: Mechanism, throw: bool):
-        """The stored solve ([`optim.windows.stored_solve`][]) and the sample index of t_start."""
-        opts = dict(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
-        return W.stored_solve(mech, self.grid(mech), opts, throw)
+        """The stored solve ([`stored_solve`][optim.objective.stored_solve]) and the sample index of t_start."""
+        return stored_solve(mech, self.grid(mech), self.options, throw)
 
     def evaluate(self, mech: Mechanism) -> tuple[dict[str, Float[Array, ""]], jax.Array]:
         """The RMS metrics and whether the solve succeeded, never raising (batch callers
         report failures; failed designs' metrics are NaN)."""
         sim, n0 = self.solve(mech, False)
-        sig = W.rms_signal_values(mech, sim.ts[n0 + 1 :], sim.ys[n0 + 1 :])
+        sig = rms_signal_values(mech, sim.ts[n0 + 1 :], sim.ys[n0 + 1 :])
         values = {k: safe_sqrt(jnp.mean(v**2)) for k, v in sig.items()}
         ok = sim.ok & jnp.all(jnp.stack([jnp.isfinite(v) for v in values.values()]))
         return {k: jnp.where(ok, v, jnp.nan) for k, v in values.items()}, ok
@@ -150,136 +246,79 @@ class Pathwise(AbstractObjective):
         if not self.throw:
             return self.evaluate(mech)[0]
         sim, n0 = self.solve(mech, True)
-        sig = W.rms_signal_values(mech, sim.ts[n0 + 1 :], sim.ys[n0 + 1 :])
+        sig = rms_signal_values(mech, sim.ts[n0 + 1 :], sim.ys[n0 + 1 :])
         return {k: safe_sqrt(jnp.mean(v**2)) for k, v in sig.items()}
 
     def forward_mode(self) -> bool:
         return False
 
     def describe(self) -> dict:
-        return {"kind": "pathwise", **_fields(self)}
+        return {"kind": "pathwise", **_fields(self), **options_fields(self.options)}
 
 
-class Ensemble(AbstractObjective):
-    """The exact metrics over the window ``(t_start, t_end]`` of one forward solve, with
-    the ensemble-sensitivity gradient of K short windows re-solved from the forward
-    solve's states ([`optim.windows`][]; a trend estimate, first order: do not take
-    second derivatives of it).
+def _check_keys(values: dict, valid: set) -> None:
+    bad = set(values) - valid
+    if bad:
+        raise ParameterError(f"unknown [objective] keys {sorted(bad)}; valid: {sorted(valid)}")
 
-    Attributes:
-        t_start: start of the evaluation window (t_start, t_end], s (default 0.1: the
-            window is the second and third revolutions at 600 rpm).
-        t_end: end of the evaluation window, s (default 0.3).
-        samples_per_degree: samples per degree of crank angle, > 0.
-        window: length of each ensemble window, s; rounded to whole sample steps and
-            shrunk to divide the evaluation window; in (0, t_end - t_start].
-        windows: number of ensemble windows, spread evenly (0: all, tiling the window).
-        window_max_steps: step budget of each window; a window that exceeds it is left
-            out of the ensemble (more than half failing is an error, or NaN).
-        window_solver: solver of the windows (a name of
-            `jaxcrank.numerics.solve.SOLVERS` or a diffrax solver instance). An
-            L-stable one: an explicit solver's step sequence sits at its stability limit
-            in stick phases and the derivative of its discrete solution then blows up in
-            about 1 % of windows (docs/optimisation.md, "The gradient").
-        window_adjoint: diffrax adjoint of the windows: ``diffrax.ForwardMode()``
-            (differentiate with [`value_and_grad`][optim.objective.value_and_grad] / ``jax.jacfwd``) or
-            ``diffrax.RecursiveCheckpointAdjoint()`` (``jax.grad``).
-        rtol: relative solver tolerance on the scaled state, > 0.
-        atol: absolute solver tolerance on the scaled state (scaled units), > 0.
-        max_steps: step budget of the long solve.
-        throw: see [`AbstractObjective`][optim.objective.AbstractObjective].
+
+def objective_from_config(section: dict) -> AbstractObjective:
+    """The objective of an ``[objective]`` table: ``method`` ("ensemble" by default,
+    "pathwise" or "steady_state") and the flat keys of that objective's
+    ``describe()``: its fields, the solve's ``solver``/``rtol``/``atol``/``dt0``/``max_steps``
+    (an ensemble's windows: the same with ``window_``; they follow the solve's rtol/atol
+    unless given), and a steady state's settings; ``window_gradient`` ("forward" or
+    "reverse") picks an ensemble's window adjoint, ``on_failure`` ("raise" or "nan") its
+    ``throw``.
 
     Raises:
-        ParameterError: for an empty window, a window outside it, or an adjoint that is
-            neither forward nor reverse mode.
-    """
+        ParameterError: for an unknown method, key or value (the message lists the valid ones)."""
+    from .ensemble import WINDOW_DEFAULTS, Ensemble
+    from .steady import STEADY_OBJECTIVE, Steady
 
-    t_start: float = eqx.field(static=True, default=0.1)
-    t_end: float = eqx.field(static=True, default=0.3)
-    samples_per_degree: float = eqx.field(static=True, default=10.0)
-    window: float = eqx.field(static=True, default=2e-3)
-    windows: int = eqx.field(static=True, default=25)
-    window_max_steps: int = eqx.field(static=True, default=5_000)
-    window_solver: object = eqx.field(static=True, default="rodas4")
-    window_adjoint: diffrax.AbstractAdjoint = eqx.field(static=True, default=diffrax.ForwardMode())
-    rtol: float = eqx.field(static=True, default=DEFAULTS.rtol)
-    atol: float = eqx.field(static=True, default=DEFAULTS.atol)
-    max_steps: int = eqx.field(static=True, default=DEFAULTS.max_steps)
-    throw: bool = eqx.field(static=True, default=True)
+    values = dict(section)
+    kind = values.pop("method", "ensemble")
+    kinds = {"ensemble": Ensemble, "pathwise": Pathwise, "steady_state": Steady}
+    if kind not in kinds:
+        raise ParameterError(f"objective method {kind!r} is unknown; valid: 'ensemble', 'pathwise', 'steady_state'")
+    if "on_failure" in values:
+        mode = values.pop("on_failure")
+        if mode not in ("raise", "nan"):
+            raise ParameterError(f"objective on_failure {mode!r} is unknown; valid: 'raise', 'nan'")
+        values["throw"] = mode == "raise"
+    if "window_gradient" in values:
+        values["window_adjoint"] = values.pop("window_gradient")
+    _check_keys(values, set(kinds[kind]().describe()) - {"kind"})
+    if kind == "steady_state":
+        if isinstance(values.get("trend"), dict):
+            values["trend"] = objective_from_config(values["trend"])
+        solve = options_from_fields(values, STEADY_OBJECTIVE.solve)
+        steady = {k: values.pop(k) for k in list(values) if k not in ("trend", "throw")}
+        return Steady(options=dataclasses.replace(STEADY_OBJECTIVE, solve=solve, **steady), **values)
+    if "window_adjoint" in values:
+        mode = values.pop("window_adjoint")
+        adjoints = {"forward": diffrax.ForwardMode(), "reverse": diffrax.RecursiveCheckpointAdjoint()}
+        if mode not in adjoints:
+            raise ParameterError(f"objective window_gradient {mode!r} is unknown; valid: 'forward', 'reverse'")
+        values["window_adjoint"] = adjoints[mode]
+    values["options"] = options_from_fields(values, DEFAULTS)
+    if kind == "ensemble":
+        base = WINDOW_DEFAULTS.replace(rtol=values["options"].rtol, atol=values["options"].atol)
+        values["window_options"] = options_from_fields(values, base, "window_")
+    return kinds[kind](**values)
 
-    def __check_init__(self):
-        _check_window(self.t_start, self.t_end, self.samples_per_degree)
-        if not 0.0 < self.window <= self.t_end - self.t_start:
-            raise ParameterError(
-                f"ensemble window = {self.window:g} s must be in (0, t_end - t_start = {self.t_end - self.t_start:g}] s"
-            )
-        if not isinstance(self.window_adjoint, diffrax.ForwardMode | diffrax.RecursiveCheckpointAdjoint):
-            raise ParameterError(
-                f"window_adjoint = {self.window_adjoint!r} is not supported; valid: diffrax.ForwardMode() "
-                "or diffrax.RecursiveCheckpointAdjoint()"
-            )
 
-    def grid(self, mech: Mechanism) -> W.Grid:
-        """The sample grid with the ensemble windows ([`optim.windows.sample_grid`][])."""
-        return W.sample_grid(mech, self.t_start, self.t_end, self.samples_per_degree, self.window)
-
-    def _options(self) -> dict:
-        return dict(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
-
-    def reference(self, mech: Mechanism) -> tuple[dict[str, Float[Array, ""]], W.Starts]:
-        """One forward solve (no gradient, [`optim.windows.tracked_solve`][]): the
-        exact RMS metrics (NaN where the solve failed and ``throw`` is False) and the
-        [`Starts`][optim.windows.Starts] of the ensemble windows."""
-        grid = self.grid(mech)
-        mech = jax.lax.stop_gradient(mech)
-        sim = W.tracked_solve(mech, grid, self.windows, self._options(), self.throw)
-        exact = {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in rms_metrics(mech)}
-        return jax.lax.stop_gradient(exact), W.window_starts(sim)
-
-    def window_sums(
-        self, mech: Mechanism, starts: W.Starts, i, grid: W.Grid | None = None
-    ) -> tuple[dict[str, Float[Array, ""]], jax.Array]:
-        """Window ``i`` re-solved for ``mech`` from the carried-over start state: the
-        sums of squares of the RMS metrics' signals over its samples (units squared; 0
-        where the window failed) and whether it finished. ``grid``: the sample grid of
-        the base design (default [`grid`][optim.objective.Ensemble.grid] of ``mech``, which needs a concrete
-        ``driver.speed``)."""
-        grid = self.grid(mech) if grid is None else grid
-        ts, ys, ok = W.solve_window(
-            mech,
-            starts,
-            i,
-            grid,
-            solver=self.window_solver,
-            adjoint=self.window_adjoint,
-            options=dict(rtol=self.rtol, atol=self.atol),
-            max_steps=self.window_max_steps,
-        )
-        sig = W.rms_signal_values(mech, ts, ys)
-        return {k: jnp.where(ok, jnp.sum(v**2), 0.0) for k, v in sig.items()}, ok
-
-    def pooled(self, mech: Mechanism, starts: W.Starts) -> dict[str, Float[Array, ""]]:
-        """The RMS metrics pooled over the windows re-solved for ``mech`` from the fixed
-        ``starts``; their derivative is the ensemble sum of the windows' derivatives."""
-        n_window = self.grid(mech).n_window
-        sums, ok = W.over_windows(lambda i: self.window_sums(mech, starts, i), starts)
-        n_ok = W.windows_ok(ok, self.throw)
-        return {k: safe_sqrt(jnp.sum(jnp.where(ok, v, 0.0)) / (n_window * n_ok)) for k, v in sums.items()}
-
-    def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
-        exact, starts = self.reference(mech)
-        surrogate = self.pooled(mech, starts)
-        return {k: straight_through(exact[k], surrogate[k]) for k in rms_metrics(mech)}
-
-    def forward_mode(self) -> bool:
-        return isinstance(self.window_adjoint, diffrax.ForwardMode)
-
-    def describe(self) -> dict:
-        d = {"kind": "ensemble", **_fields(self)}
-        d["window_adjoint"] = "forward" if self.forward_mode() else "reverse"
-        if not isinstance(d["window_solver"], str):
-            d["window_solver"] = type(d["window_solver"]).__name__
-        return d
+def objective_config(objective: AbstractObjective) -> dict:
+    """The ``[objective]`` table of ``objective`` ([`objective_from_config`][optim.objective.objective_from_config]
+    reads it back)."""
+    d = objective.describe()
+    out = {"method": d.pop("kind")}
+    if "window_adjoint" in d:
+        out["window_gradient"] = d.pop("window_adjoint")
+    out["on_failure"] = "raise" if d.pop("throw") else "nan"
+    if "trend" in d:  # the steady-state objective's trend estimate: an [objective.trend] table
+        d["trend"] = None if objective.trend is None else objective_config(objective.trend)
+    return {**out, **d}
 
 
 def eq19(objective: AbstractObjective, mech: Mechanism) -> Float[Array, ""]:

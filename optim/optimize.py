@@ -166,8 +166,8 @@ def _checked(problem: AbstractProblem, u, value, grad):
     x = ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, np.asarray(problem.from_unit(u))))
     raise SimulationError(
         f"the objective could not be evaluated at {x}: its solve did not reach t_end within the "
-        "objective's max_steps, or more than half of the ensemble windows failed; raise the objective's "
-        "max_steps or window_max_steps, loosen its rtol/atol, or shorten its window"
+        "objective's options.max_steps, or more than half of the ensemble windows failed; raise the objective's "
+        "options.max_steps or window_options.max_steps, loosen its rtol/atol, or shorten its window"
     )
 
 

@@ -163,7 +163,7 @@ def _line_search_function(extended):
     Why: optax's zoom line search (``optax.scale_by_zoom_linesearch``, checked against
     optax 0.2.8) differentiates ``value_fn`` with ``jax.value_and_grad`` and offers no
     argument for a function that returns value and gradient; a forward-mode objective
-    ([`optim.objective.Ensemble`][] with ``diffrax.ForwardMode``) has no reverse-mode
+    ([`optim.ensemble.Ensemble`][] with ``diffrax.ForwardMode``) has no reverse-mode
     derivative. A ``jax.custom_vjp`` (public JAX API) hands the line search the
     gradient the objective's own program computes."""
 

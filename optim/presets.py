@@ -11,8 +11,9 @@ from jaxcrank import reference
 from jaxcrank.physics.presets import paper
 
 from .design import design_problem
+from .ensemble import Ensemble
 from .four_bar import four_bar_problem
-from .objective import AbstractObjective, Ensemble
+from .objective import AbstractObjective
 from .problem import ParameterProblem
 
 #: the paper's optimum of Eq. 19 (deg) and its reduction from the start design (%)

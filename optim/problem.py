@@ -33,7 +33,8 @@ from jaxcrank.physics.parameters import get_parameter, parameter_value, set_para
 from jaxcrank.physics.params import ParameterError
 from jaxcrank.runs.sampling import Tolerance, monte_carlo
 
-from .objective import EQ19, AbstractObjective, Ensemble, value_and_grad
+from .ensemble import Ensemble
+from .objective import EQ19, AbstractObjective, value_and_grad
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,7 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import search
-from .objective import AbstractObjective, Ensemble
+from .ensemble import Ensemble
+from .objective import AbstractObjective
 from .presets import PROBLEMS
 from .problem import AbstractProblem as Problem
 

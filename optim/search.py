@@ -24,7 +24,8 @@ from tqdm.auto import tqdm
 
 from jaxcrank.physics.params import ParameterError
 
-from .objective import AbstractObjective, Ensemble, Pathwise
+from .ensemble import Ensemble
+from .objective import AbstractObjective, Pathwise
 from .problem import AbstractProblem as Problem
 
 
@@ -40,7 +41,7 @@ def pathwise_of(objective: AbstractObjective) -> Pathwise:
     if isinstance(objective, Pathwise):
         return objective
     if isinstance(objective, Ensemble):
-        keep = ("t_start", "t_end", "samples_per_degree", "rtol", "atol", "max_steps")
+        keep = ("t_start", "t_end", "samples_per_degree", "options")
         return Pathwise(**{k: getattr(objective, k) for k in keep})
     raise ParameterError(
         f"the grid search evaluates windowed objectives (Pathwise, Ensemble), not {type(objective).__name__}"

@@ -7,7 +7,7 @@ metrics ([`metric_names`][optim.sensitivity.metric_names]) and its gradient with
 elasticities ``(dm/dp) (p / m)`` (percent change of the metric per percent change
 of the parameter), which [`optim.plots.plot_tornado`][] draws as a tornado chart.
 
-The same care as the optimisation ([`optim.objective.Ensemble`][]): over the paper's
+The same care as the optimisation ([`optim.ensemble.Ensemble`][]): over the paper's
 window the pathwise derivative of a chaotic trajectory is ~1e27 and meaningless;
 the gradient here is the ensemble-sensitivity estimate. One solve at the design
 gives the exact metric values and the pins' states in their bearings at the start
@@ -40,8 +40,9 @@ from jaxcrank.physics.parameters import get_parameter, parameter_unit, set_param
 from jaxcrank.physics.params import ParameterError
 from jaxcrank.physics.signals import rms_metrics
 
-from . import windows as W
-from .objective import EQ19, Ensemble
+from . import ensemble as W
+from .ensemble import Ensemble
+from .objective import EQ19
 
 #: the joint-law parameters among the default parameters, each tied over the joints that have it
 TIED_PARAMETERS = ("contact.restitution", "friction.coefficient", "hole_material.youngs_modulus")
@@ -85,7 +86,7 @@ def window_sums(
     base: Mechanism, names, x: Float[ArrayLike, " params"], starts: W.Starts, i: Int[ArrayLike, ""], obj: Ensemble
 ) -> tuple[Float[Array, " metrics"], Bool[Array, ""]]:
     """Window ``i`` re-solved for ``base`` with ``names`` set to ``x`` (SI) from the
-    carried-over start state ([`optim.objective.Ensemble.window_sums`][]): the sums of
+    carried-over start state ([`optim.ensemble.Ensemble.window_sums`][]): the sums of
     squares of the metrics' signals over its samples, stacked in the order of
     [`metric_names`][optim.sensitivity.metric_names] (units squared), and whether it finished."""
     sums, ok = obj.window_sums(set_parameters(base, names, x), starts, i, obj.grid(base))
@@ -109,8 +110,7 @@ def sensitivities(mech: Mechanism, names: Sequence[str] | None = None, obj: Ense
     n_window, dt = grid.n_window, grid.dt
     # the metrics over the samples in (t_start, t_end] tracked during the solve, which
     # stores only the windows' starts
-    opts = dict(rtol=obj.rtol, atol=obj.atol, max_steps=obj.max_steps)
-    sim = W.tracked_solve(mech, grid, obj.windows, opts, True)
+    sim = W.tracked_solve(mech, grid, obj.windows, obj.options, True)
     value = metric_values(sim)
     starts = W.window_starts(sim)
     x0 = jnp.array([get_parameter(mech, n) for n in names])
@@ -132,7 +132,7 @@ def sensitivities(mech: Mechanism, names: Sequence[str] | None = None, obj: Ense
     if n_ok < 0.5 * len(ok):
         raise RuntimeError(
             f"{len(ok) - n_ok} of {len(ok)} ensemble windows failed; raise "
-            "Ensemble.window_max_steps, loosen rtol/atol or shorten Ensemble.window"
+            "Ensemble.window_options.max_steps, loosen rtol/atol or shorten Ensemble.window"
         )
     w = ok.astype(float)
     estimate = np.sqrt(np.einsum("k,kc->c", w, sums) / (n_window * n_ok))

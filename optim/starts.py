@@ -26,7 +26,7 @@ from jaxcrank.physics.params import ParameterError
 
 from .optimize import Settings, optimize
 from .problem import AbstractProblem
-from .steady import PERIODIC, SteadyEvaluator
+from .steady import FAILED, PERIODIC, SteadyEvaluator
 
 #: candidate starts classified at most by `periodic_start` (the problem's start and 7 Sobol points)
 CLASSIFY_STARTS = 8
@@ -203,7 +203,7 @@ def periodic_start(
     for u in bar:
         tic = time.perf_counter()
         value, info = evaluator.value(np.asarray(problem.from_unit(jnp.asarray(u))))
-        regime = info["regime"] if info["ok"] else "failed"
+        regime = info["regime"] if info["ok"] else FAILED
         classified.append(
             {
                 "unit_design": np.asarray(u).tolist(),

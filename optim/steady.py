@@ -16,7 +16,7 @@ start-up from rest. [`Steady`][optim.steady.Steady] measures a design there
 - **not periodic** (chaotic impacts): the long-run statistical value of the metrics
   (batch means over revolutions, with a 95 % confidence interval), reported as such;
   its gradient is the ensemble estimate of the objective's ``trend`` (an
-  [`Ensemble`][optim.objective.Ensemble]), flagged as a trend estimate, or zero without one.
+  [`Ensemble`][optim.ensemble.Ensemble]), flagged as a trend estimate, or zero without one.
 
 The steady state is found on the host (settle, period detection, Newton shooting), so
 this objective is evaluated at concrete designs, outside ``jax.jit``: use
@@ -38,69 +38,46 @@ from jaxtyping import Array, Float
 
 from jaxcrank.numerics import steady as S
 from jaxcrank.numerics.estimators import straight_through
-from jaxcrank.numerics.shooting import STEADY_DEFAULTS, period_solve
-from jaxcrank.numerics.solve import SolveOptions
+from jaxcrank.numerics.results import Regime
+from jaxcrank.numerics.shooting import SteadyOptions, period_solve
 from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
 from jaxcrank.physics.params import ParameterError
 from jaxcrank.physics.signals import rms_metrics
 
-from .objective import AbstractObjective, Ensemble, value_and_grad
+from .ensemble import Ensemble
+from .objective import AbstractObjective, options_fields, value_and_grad
 
-#: the two regimes, as :func:`jaxcrank.steady_state` names them
-PERIODIC, NOT_PERIODIC = "periodic", "not periodic"
+#: the steady-state objective's default settings: periods up to 2 revolutions, 720 samples per revolution
+STEADY_OBJECTIVE = SteadyOptions(max_period=2, samples_per_revolution=720)
+#: the regimes, as [`jaxcrank.steady_state`][jaxcrank.numerics.steady.steady_state] names them
+PERIODIC, NOT_PERIODIC, FAILED = Regime.PERIODIC, Regime.NOT_PERIODIC, Regime.FAILED
 
 
 class Steady(AbstractObjective):
     """The RMS metrics over one period of the steady periodic orbit (module docstring).
 
     Attributes:
-        settle_revolutions: revolutions settled from rest before shooting (a cold start), >= 1.
-        max_period: the longest period looked for, revolutions, >= 1.
-        newton_tol: Newton shooting tolerance, scaled units (clearances).
-        max_newton: Newton iterations at most.
-        samples_per_revolution: samples per revolution of the orbit's RMS metrics (equal
-            crank-angle steps), >= 2.
-        statistics_revolutions: not periodic: revolutions of the
-            long-run statistics and per batch of their batch means (the same for batch_revolutions).
-        batch_revolutions: not periodic: revolutions of the
-            long-run statistics and per batch of their batch means (the same for statistics_revolutions).
-        rtol: solver tolerances on the scaled state, > 0 (shooting needs tight ones) (the same for atol).
-        atol: solver tolerances on the scaled state, > 0 (shooting needs tight ones) (the same for rtol).
-        max_steps: step budget of each solve of the steady-state search (a design that
-            needs more is a failed evaluation: NaN, or raises with ``throw``).
+        options: the steady-state settings ([`jaxcrank.SteadyOptions`][jaxcrank.numerics.shooting.SteadyOptions];
+            default `STEADY_OBJECTIVE`: periods up to 2 revolutions, 720 samples per
+            revolution). A design whose solve needs more than ``options.solve.max_steps``
+            steps is a failed evaluation: NaN, or raises with ``throw``.
         trend: not periodic: the objective whose gradient serves as a trend estimate
-            (an [`Ensemble`][optim.objective.Ensemble]; None: zero gradient there).
+            (an [`Ensemble`][optim.ensemble.Ensemble]; None: zero gradient there).
         throw: a failed steady-state solve raises (True) or gives NaN values (False).
 
     Raises:
-        ParameterError: for a setting outside its range.
+        ParameterError: for options that are not a ``SteadyOptions`` or a trend that is not an ``Ensemble``.
     """
 
-    settle_revolutions: int = eqx.field(static=True, default=20)
-    max_period: int = eqx.field(static=True, default=2)
-    newton_tol: float = eqx.field(static=True, default=1e-7)
-    max_newton: int = eqx.field(static=True, default=8)
-    samples_per_revolution: int = eqx.field(static=True, default=720)
-    statistics_revolutions: int = eqx.field(static=True, default=10)
-    batch_revolutions: int = eqx.field(static=True, default=2)
-    rtol: float = eqx.field(static=True, default=STEADY_DEFAULTS.rtol)
-    atol: float = eqx.field(static=True, default=STEADY_DEFAULTS.atol)
-    max_steps: int = eqx.field(static=True, default=STEADY_DEFAULTS.max_steps)
+    options: SteadyOptions = eqx.field(static=True, default=STEADY_OBJECTIVE)
     trend: Ensemble | None = eqx.field(static=True, default=None)
     throw: bool = eqx.field(static=True, default=True)
 
     def __check_init__(self):
-        for name in ("settle_revolutions", "max_period", "batch_revolutions"):
-            if getattr(self, name) < 1:
-                raise ParameterError(f"Steady.{name} = {getattr(self, name)!r} must be >= 1")
-        if self.samples_per_revolution < 2:
-            raise ParameterError(f"Steady.samples_per_revolution = {self.samples_per_revolution!r} must be >= 2")
+        if not isinstance(self.options, SteadyOptions):
+            raise ParameterError(f"Steady.options = {self.options!r} must be a jaxcrank.SteadyOptions")
         if self.trend is not None and not isinstance(self.trend, Ensemble):
             raise ParameterError(f"Steady.trend = {self.trend!r} must be an Ensemble objective or None")
-
-    def options(self) -> SolveOptions:
-        """The solve settings of the shooting and of the orbit."""
-        return STEADY_DEFAULTS.replace(rtol=self.rtol, atol=self.atol, max_steps=self.max_steps)
 
     def solve(self, mech: Mechanism, warm_start=None) -> S.SteadyState:
         """The steady state of the concrete ``mech`` ([`jaxcrank.steady_state`][jaxcrank.numerics.steady.steady_state]),
@@ -109,19 +86,7 @@ class Steady(AbstractObjective):
 
         Raises:
             jaxcrank.SteadyStateError: the solve failed and ``throw`` is True."""
-        return S.steady_state(
-            mech,
-            settle_revolutions=self.settle_revolutions,
-            max_period=self.max_period,
-            newton_tol=self.newton_tol,
-            max_newton=self.max_newton,
-            warm_start=warm_start,
-            statistics_revolutions=self.statistics_revolutions,
-            batch_revolutions=self.batch_revolutions,
-            samples_per_revolution=self.samples_per_revolution,
-            options=self.options(),
-            throw=self.throw,
-        )
+        return S.steady_state(mech, self.options, warm_start=warm_start, throw=self.throw)
 
     def rms_at(self, mech: Mechanism, steady: S.SteadyState) -> dict[str, Float[Array, ""]]:
         """The RMS metrics of ``mech`` (traceable; e.g. built from traced design
@@ -139,7 +104,7 @@ class Steady(AbstractObjective):
                 S.orbit_start(mech, orbit),
                 orbit.period_revolutions,
                 options=orbit.options,
-                samples_per_revolution=self.samples_per_revolution,
+                samples_per_revolution=self.options.samples_per_revolution,
             )
             return {k: jnp.where(sim.ok, sim.metrics[k], jnp.nan) for k in names}
         values = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in names}
@@ -158,9 +123,10 @@ class Steady(AbstractObjective):
         return True
 
     def describe(self) -> dict:
-        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        o = self.options
+        d = {f.name: getattr(o, f.name) for f in dataclasses.fields(o) if f.name != "solve"}
         d["trend"] = None if self.trend is None else self.trend.describe()
-        return {"kind": "steady_state", **d}
+        return {"kind": "steady_state", **d, **options_fields(o.solve), "throw": self.throw}
 
 
 def _light(steady: S.SteadyState) -> S.SteadyState:
@@ -245,7 +211,7 @@ class SteadyEvaluator:
         if key not in self._steady:
             mech = self.problem.mechanism(jnp.asarray(key))
             steady = self.objective.solve(mech, warm_start=self.last)
-            settled = steady.revolutions.get("settle", 0) >= self.objective.settle_revolutions
+            settled = steady.revolutions.get("settle", 0) >= self.objective.options.settle_revolutions
             if self.last is not None and not steady.periodic and not settled:
                 steady = self.objective.solve(mech)
             if steady.periodic:
@@ -270,10 +236,10 @@ class SteadyEvaluator:
             rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in names}
         return float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x))), info
 
-    def regime_at(self, x) -> str:
-        """``"periodic"`` or ``"not periodic"`` at SI design ``x`` (``"failed"`` when the solve failed)."""
+    def regime_at(self, x) -> Regime:
+        """The [`Regime`][jaxcrank.numerics.results.Regime] at SI design ``x`` (``FAILED`` when the solve failed)."""
         steady = self.steady_at(x)
-        return steady.regime if steady.ok else "failed"
+        return steady.regime if steady.ok else FAILED
 
     def _program(self, steady: S.SteadyState, args):
         """The compiled value and gradient for the orbits of ``steady``'s period and

@@ -103,7 +103,7 @@ def outcome(mech) -> dict:
     of slider x, rod x and the pin eccentricities (<= 1 inside the bound)."""
     ts = jnp.linspace(0.0, T1, N_SAMPLES)
     try:
-        sim = jc.simulate(traced(mech), ts=ts, max_steps=MAX_STEPS)
+        sim = jc.simulate(traced(mech), ts=ts, options=jc.SolveOptions(max_steps=MAX_STEPS))
     except jc.SimulationError as err:
         msg = str(err)
         status = "max_steps" if "max_steps" in msg else "non_finite" if "non-finite" in msg else "solver_failed"

@@ -21,14 +21,14 @@ ROOT = Path(__file__).resolve().parents[1]
 CHILD = r"""
 import json, sys
 import jax
-from jaxcrank import cache
+from jaxcrank import SolveOptions, cache
 folder = cache.enable(sys.argv[1])
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 events = []
 jax.monitoring.register_event_listener(lambda name, **kw: events.append(name))
 import numpy as np
 import pytest
-from optim.objective import Ensemble
+from optim.ensemble import Ensemble
 from optim.optimize import programs
 from optim.problem import ParameterProblem
 from optim.presets import paper_problem
@@ -38,7 +38,8 @@ def counting(self, *a, **k):
     traced.append(1)
     return original(self, *a, **k)
 ParameterProblem.objective_value = counting
-prob = paper_problem(Ensemble(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_solver="tsit5"), start=None)
+tsit5 = SolveOptions.from_text("tsit5", max_steps=5_000)
+prob = paper_problem(Ensemble(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_options=tsit5), start=None)
 vg, _ = programs(prob)
 value, grad = vg(np.asarray(prob.start_unit()), 1.0)
 print(json.dumps({"traced": len(traced), "value": float(value), "grad": np.asarray(grad).tolist(),

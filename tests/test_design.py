@@ -15,17 +15,19 @@ import numpy as np
 import pytest
 import tomli_w
 
+from jaxcrank import SolveOptions
 from jaxcrank.physics.params import ParameterError
 from optim import cli
 from optim.design import DESIGN_VARIABLES, TERMS, DesignProblem, design_problem, geometry, ideal_stroke
-from optim.objective import AbstractObjective, Ensemble, Pathwise
+from optim.ensemble import Ensemble
+from optim.objective import AbstractObjective, Pathwise
 from optim.optimize import Settings, optimize
 from optim.optimizers import adam
 from optim.search import pathwise_of
 
 # A non-chaotic window for exact-gradient checks (as tests/test_objectives.py's EXACT):
 # the first 1.2 ms, tight tolerances, pathwise derivative.
-EXACT = Pathwise(t_start=0.0, t_end=1.2e-3, rtol=1e-10, atol=1e-10, max_steps=100_000)
+EXACT = Pathwise(t_start=0.0, t_end=1.2e-3, options=SolveOptions(rtol=1e-10, atol=1e-10, max_steps=100_000))
 
 
 def test_geometry_holds_the_stroke_transmission_and_assembly_over_the_box():
@@ -273,7 +275,12 @@ def test_ensemble_terms_have_the_exact_values_and_finite_gradients():
     """The ensemble objective of the design problem (short window, tsit5 windows):
     values equal the forward solve's terms, gradients finite, and the objective's
     gradient is the weighted sum of the terms' gradients plus the cost's."""
-    obj = Ensemble(t_start=0.02, t_end=0.03, window_solver="tsit5", window_adjoint=diffrax.RecursiveCheckpointAdjoint())
+    obj = Ensemble(
+        t_start=0.02,
+        t_end=0.03,
+        window_options=SolveOptions.from_text("tsit5", max_steps=5_000),
+        window_adjoint=diffrax.RecursiveCheckpointAdjoint(),
+    )
     prob = design_problem(obj)
     x = jnp.asarray(prob.from_unit(prob.start_unit()))
 

@@ -33,7 +33,12 @@ def _mechanism(p):
 
 def rms_slider_deviation_mm(p, t1=WINDOW, adjoint=None):
     mech = _mechanism(p)
-    sim = jc.simulate(mech, ts=jnp.linspace(0.0, t1, 51), rtol=1e-10, atol=1e-10, max_steps=100_000, adjoint=adjoint)
+    sim = jc.simulate(
+        mech,
+        ts=jnp.linspace(0.0, t1, 51),
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=100_000),
+        adjoint=adjoint,
+    )
     q = jax.vmap(lambda t, y: model.evaluate(mech, t, y).q)(sim.ts, sim.ys)
     qi = jax.vmap(lambda t: ideal.positions(mech, t))(sim.ts)
     rod = q[:, ROD, :2] - qi[:, ROD, :2]

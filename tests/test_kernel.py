@@ -15,6 +15,7 @@ import pytest
 
 import jaxcrank as jc
 from jaxcrank import sweep
+from jaxcrank.numerics import results
 from jaxcrank.numerics import solve as solve_module
 from jaxcrank.numerics.kernel import build, engine, gpu, source
 from jaxcrank.physics import catalogue, laws, model, presets
@@ -214,7 +215,7 @@ def test_step_budget_gives_max_steps_and_the_others_finish():
     )
     ref = jax_path(names, designs, settings)
     got = engine.solve(jc.paper(), names, designs, settings)
-    assert [sweep.STATUSES[s] for s in got.status] == list(ref["status"]) == ["ok", "max_steps", "ok"]
+    assert [results.status_label(s) for s in got.status] == list(ref["status"]) == ["ok", "max_steps", "ok"]
     assert got.steps[1] + got.rejected[1] == 20_000
     for i in (0, 2):
         alone = engine.solve(jc.paper(), names, designs[i : i + 1], settings)
@@ -233,13 +234,19 @@ def test_non_finite_state_gives_non_finite_and_the_others_finish():
     y0[0, -1] = np.inf
     t_end, t_start, n_samples = 0.0005, 0.0, 19
     got = engine.solve_mechanisms([mech, mech, bad], [t_end] * 3, [t_start] * 3, n_samples, y0=y0, max_steps=2000)
-    assert [sweep.STATUSES[s] for s in got.status] == ["non_finite", "ok", "max_steps"]
+    assert [results.status_label(s) for s in got.status] == ["non_finite", "ok", "max_steps"]
     sim = solve_module.simulate(
         mech, t_end, n_samples=n_samples, y0=y0[0], throw=False, metrics_start=t_start, save_samples=False
     )
     assert bool(sim.ok) and not np.all(np.isfinite(np.asarray(sim.ys)))
     sim_bad = solve_module.simulate(
-        bad, t_end, n_samples=n_samples, throw=False, metrics_start=t_start, save_samples=False, max_steps=2000
+        bad,
+        t_end,
+        n_samples=n_samples,
+        throw=False,
+        metrics_start=t_start,
+        save_samples=False,
+        options=jc.SolveOptions(max_steps=2000),
     )
     assert not bool(sim_bad.ok)
     alone = engine.solve_mechanisms([mech], [t_end], [t_start], n_samples)

@@ -90,7 +90,7 @@ def test_failure_message_of_the_python_api():
         match=r"requested end time t1 = 0.01 s \(the last sample it reached is "
         r"t = [0-9.e-]+ s, sample \d+ of 11\)",
     ):
-        jc.simulate(jc.paper(), 0.01, n_samples=11, max_steps=10)
+        jc.simulate(jc.paper(), 0.01, n_samples=11, options=jc.SolveOptions(max_steps=10))
 
 
 def _one_error_line(capsys):

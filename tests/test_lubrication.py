@@ -364,7 +364,12 @@ def test_steady_state_and_its_viscosity_gradient_on_the_lubricated_four_bar():
     steady = jc.steady_state(base)
     assert steady.periodic
     y, n = steady.section_state, 2 * model.n_dof(base)
-    one = jc.simulate(base, ts=jnp.array([0.0, float(base.period)]), y0=y.at[-2:].set(0.0), rtol=1e-10, atol=1e-10)
+    one = jc.simulate(
+        base,
+        ts=jnp.array([0.0, float(base.period)]),
+        y0=y.at[-2:].set(0.0),
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10),
+    )
     assert float(jnp.max(jnp.abs(one.ys[-1][:n] - y[:n]))) <= 1e-7
     p0 = jnp.array([float(base.joints["B"].viscosity), float(base.joints["C"].viscosity)])
     _, grad = steady_value_and_grad(lambda sim: sim.metrics[key], build, p0, steady)

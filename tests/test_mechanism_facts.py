@@ -159,7 +159,7 @@ def test_work_energy_balance_closes_over_four_revolutions(name):
     potential and contact energy equals the driver's work less the dissipated work to
     1e-4 of the driver's work (measured: 1.1e-6 four-bar, 1.8e-6 slider-crank-A)."""
     mech = jc.preset(name)
-    sim = jc.simulate(mech, 0.4, n_samples=401, max_steps=2_000_000)
+    sim = jc.simulate(mech, 0.4, n_samples=401, options=jc.SolveOptions(max_steps=2_000_000))
     balance = outputs.energy_balance(outputs.trajectory(sim))
     assert abs(balance["residual_J"]) < 1e-4 * abs(balance["driver_work_J"]), balance
 
@@ -223,7 +223,9 @@ def test_isolated_impact_in_the_mechanism_keeps_the_restitution_relation(name, j
     rest[k][0] = speed  # the approach-speed memory has tracked the approach
     y0 = _start_state(mech, 0.0, d, d_rate, np.concatenate([*rest, np.zeros(2)]))
     t1 = 0.5 * c / speed  # the rebounding pin is still inside its clearance
-    sim = jc.simulate(mech, ts=jnp.linspace(0.0, t1, 101), y0=y0, rtol=1e-10, atol=1e-10, max_steps=1_000_000)
+    sim = jc.simulate(
+        mech, ts=jnp.linspace(0.0, t1, 101), y0=y0, options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=1_000_000)
+    )
     ecc, rate = (np.asarray(x[:, k]) for x in _eccentricities(mech, sim.ts, sim.ys))
     assert np.max(np.linalg.norm(ecc, axis=1)) > c  # it hit the wall
     assert np.linalg.norm(ecc[-1]) < c  # and left it
@@ -256,7 +258,10 @@ def _rms_deviation_mm(name, p, adjoint):
     names = ["crank_length", f"clearance_{model.structure(base)[1].cut[0]}"]
     mech = jc.set_parameters(base, names, p)
     sim = jc.simulate(
-        mech, ts=jnp.linspace(0.0, WINDOWS[name], 51), rtol=1e-10, atol=1e-10, max_steps=100_000, adjoint=adjoint
+        mech,
+        ts=jnp.linspace(0.0, WINDOWS[name], 51),
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=100_000),
+        adjoint=adjoint,
     )
     q = jax.vmap(lambda t, y: model.evaluate(mech, t, y).q)(sim.ts, sim.ys)
     qi = jax.vmap(lambda t: ideal.positions(mech, t))(sim.ts)

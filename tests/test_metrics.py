@@ -36,17 +36,18 @@ if order == "reversed":
 import jax.numpy as jnp
 import jaxcrank as jc
 from jaxcrank import outputs
-from optim import objective as O, sensitivity
+from optim import ensemble as E, objective as O, sensitivity
 from optim.design import design_problem
 from optim.presets import paper_problem
 
 out = {}
-exact = O.Pathwise(t_start=0.0, t_end=1.2e-3, rtol=1e-10, atol=1e-10, max_steps=100_000)
+exact = O.Pathwise(t_start=0.0, t_end=1.2e-3, options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=100_000))
 prob = design_problem(exact)
 x = jnp.asarray(prob.from_unit(prob.start_unit()))
 out["design_terms"] = {k: float(v).hex() for k, v in prob.terms(x).items()}
 out["design_pathwise"] = float(prob.objective_value(x)).hex()
-tiny = O.Ensemble(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_solver="tsit5")
+tsit5 = jc.SolveOptions.from_text("tsit5", max_steps=5_000)
+tiny = E.Ensemble(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_options=tsit5)
 out["design_ensemble"] = float(design_problem(tiny).objective_value(x)).hex()
 paper = paper_problem(tiny, start=None)
 out["paper_objective"] = float(paper.objective_value(jnp.asarray(paper.from_unit(paper.start_unit())))).hex()

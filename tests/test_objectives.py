@@ -1,4 +1,4 @@
-"""The objectives (optim.objective, optim.windows): pathwise values and exact gradients on
+"""The objectives (optim.objective, optim.ensemble): pathwise values and exact gradients on
 short windows, the ensemble estimate against central differences of its windowed
 function, the carry-over of window start states. Short settings; full windows are ``slow``."""
 
@@ -11,10 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxcrank import paper
+from jaxcrank import SolveOptions, paper
+from optim import ensemble as W
 from optim import search, sensitivity
-from optim import windows as W
-from optim.objective import EQ19, Ensemble, Pathwise, eq19, value_and_grad
+from optim.ensemble import Ensemble
+from optim.objective import EQ19, Pathwise, eq19, value_and_grad
 from optim.presets import paper_problem, tolerance_problem
 from optim.problem import ParameterProblem
 from tests.objectives import EXACT, SHORT, central_difference
@@ -103,7 +104,12 @@ def test_ensemble_gradient_is_the_derivative_of_the_windows_with_starts_fixed(ad
     against central differences of the same function, starts held fixed."""
     _estimator_matches_central_differences(
         Ensemble(
-            t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-9, atol=1e-9, window_solver="tsit5", window_adjoint=adjoint
+            t_start=0.02,
+            t_end=0.022,
+            window=1e-3,
+            options=SolveOptions(rtol=1e-9, atol=1e-9),
+            window_options=SolveOptions.from_text("tsit5", rtol=1e-9, atol=1e-9, max_steps=5_000),
+            window_adjoint=adjoint,
         )
     )
 
@@ -114,12 +120,18 @@ def test_a_window_over_its_step_budget_is_left_out_not_nan():
     budget of 250 the first is left out, and value and gradient are window 1's alone
     (a failed window's solve returns inf times; they once turned the whole ensemble
     into NaN)."""
-    obj = Ensemble(t_start=0.02, t_end=0.022, window=1e-3, rtol=1e-8, atol=1e-8, window_solver="tsit5")
+    obj = Ensemble(
+        t_start=0.02,
+        t_end=0.022,
+        window=1e-3,
+        options=SolveOptions(rtol=1e-8, atol=1e-8),
+        window_options=SolveOptions.from_text("tsit5", rtol=1e-8, atol=1e-8, max_steps=5_000),
+    )
     prob = paper_problem(obj)
     mech = prob.mechanism(jnp.array([0.12, 0.40]))
     _, starts = obj.reference(mech)
     _, _, n_window, _ = obj.grid(mech)
-    tight = dataclasses.replace(obj, window_max_steps=250)
+    tight = dataclasses.replace(obj, window_options=obj.window_options.replace(max_steps=250))
     sq, ok, grads = sensitivity.window_gradients(mech, starts, tight)
     assert ok.tolist() == [False, True]
     assert float(sq[0]) == 0.0 and all(float(g[0]) == 0.0 for g in jax.tree.leaves(grads))
@@ -156,10 +168,8 @@ def test_ensemble_gradient_with_implicit_window_solvers_matches_central_differen
             t_start=0.02,
             t_end=0.022,
             window=1e-3,
-            rtol=1e-8,
-            atol=1e-8,
-            window_max_steps=window_max_steps,
-            window_solver=solver,
+            options=SolveOptions(rtol=1e-8, atol=1e-8),
+            window_options=SolveOptions.from_text(solver, rtol=1e-8, atol=1e-8, max_steps=window_max_steps),
         )
     )
 
@@ -190,10 +200,12 @@ def test_permuting_the_metric_definitions_changes_no_objective_value(monkeypatch
     """The objectives and the design terms read the metrics by name: with the RMS
     metrics' order reversed, the design problem's value is the same, bit for bit."""
     from jaxcrank.physics import signals
-    from optim import objective as O
+    from optim import ensemble as E
     from optim.design import design_problem
 
-    prob = design_problem(Pathwise(t_start=0.0, t_end=1e-3, rtol=1e-10, atol=1e-10, max_steps=100_000))
+    prob = design_problem(
+        Pathwise(t_start=0.0, t_end=1e-3, options=SolveOptions(rtol=1e-10, atol=1e-10, max_steps=100_000))
+    )
     x = jnp.asarray(prob.from_unit(prob.start_unit()))
     before = float(jax.jit(prob.objective_value)(x))
     original = signals.rms_metrics
@@ -202,7 +214,7 @@ def test_permuting_the_metric_definitions_changes_no_objective_value(monkeypatch
         return tuple(reversed(original(mech)))
 
     monkeypatch.setattr(signals, "rms_metrics", reordered)
-    monkeypatch.setattr(O, "rms_metrics", reordered)
+    monkeypatch.setattr(E, "rms_metrics", reordered)
     after = float(jax.jit(lambda x: prob.objective_value(x))(x))
     assert after == before
 

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxcrank import paper
+from jaxcrank import SolveOptions, paper
 from jaxcrank.physics.params import ParameterError
 from optim import search
 from optim.objective import Pathwise, eq19
@@ -130,7 +130,7 @@ def test_robust_problem_config_round_trip():
 
 
 def test_grid_reports_failed_designs_without_nan_in_ok_rows():
-    prob = paper_problem(Pathwise(t_start=0.0, t_end=2e-3, max_steps=50))
+    prob = paper_problem(Pathwise(t_start=0.0, t_end=2e-3, options=SolveOptions(max_steps=50)))
     values, ok = search.evaluate(prob, np.array([[0.12, 0.40], [0.11, 0.41]]), progress=False)
     assert not ok.any() and np.isnan(values).all()
 
@@ -155,7 +155,7 @@ def _implemented(cls):
             "optim.problem.AbstractProblem",
             ("optim.problem.ParameterProblem", "optim.design.DesignProblem", "optim.four_bar.FourBarProblem"),
         ),
-        ("optim.objective.AbstractObjective", ("optim.objective.Pathwise", "optim.objective.Ensemble")),
+        ("optim.objective.AbstractObjective", ("optim.objective.Pathwise", "optim.ensemble.Ensemble")),
         ("optim.objective.AbstractObjective", ("optim.steady.Steady",)),
         (
             "optim.optimizers.AbstractOptimizer",
@@ -238,7 +238,7 @@ def test_steady_objective_config_round_trip():
     from optim.steady import Steady
 
     problem, settings = build({"problem": "design", "objective": {"method": "steady_state", "rtol": 1e-8}})
-    assert isinstance(problem.objective, Steady) and problem.objective.rtol == 1e-8
+    assert isinstance(problem.objective, Steady) and problem.objective.options.solve.rtol == 1e-8
     again, _ = build(resolved(problem, settings, "design"))
     assert again.objective == problem.objective
     with pytest.raises(ParameterError, match="objective method 'bogus' is unknown"):

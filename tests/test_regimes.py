@@ -239,7 +239,7 @@ def test_agrees_with_steady_state(periodic, chaotic):
     from jaxcrank.numerics.steady import steady_state
 
     for mech in (periodic, chaotic):
-        steady = steady_state(mech, statistics_revolutions=4, samples_per_revolution=360)
+        steady = steady_state(mech, jc.SteadyOptions(statistics_revolutions=4, samples_per_revolution=360))
         t = regimes.classify(mech, NAMES, [_x(mech)], progress=False)
         assert t["regime"][0] == steady.regime and t["period_revolutions"][0] == steady.period_revolutions
         if steady.regime == "not periodic":

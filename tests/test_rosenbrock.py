@@ -80,7 +80,9 @@ def test_agrees_with_tsit5_on_the_paper_mechanism(paper):
     each separation is resolved less accurately by the explicit solver; at 1e-9 both are
     within 1.1e-11 m of it."""
     cols = [
-        outputs.trajectory(jc.simulate(paper, 0.005, n_samples=181, solver=s, rtol=1e-9, atol=1e-9))
+        outputs.trajectory(
+            jc.simulate(paper, 0.005, n_samples=181, options=jc.SolveOptions.from_text(s, rtol=1e-9, atol=1e-9))
+        )
         for s in ("rodas4", "tsit5")
     ]
     for name in ("slider_x", "rod_x"):

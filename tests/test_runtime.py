@@ -67,7 +67,12 @@ def test_configure_after_backend_start_warns_and_leaves_flags():
 def _compiled_solve_text(solver=solve.DEFAULTS.solver_name):
     mech = jc.paper()
     ts = solve.sample_times(mech, t1=1e-3)
-    return jax.jit(lambda m: solve.simulate(m, ts=ts, solver=solver, throw=False).ys).lower(mech).compile().as_text()
+    return (
+        jax.jit(lambda m: solve.simulate(m, ts=ts, options=solve.SolveOptions.from_text(solver), throw=False).ys)
+        .lower(mech)
+        .compile()
+        .as_text()
+    )
 
 
 X86 = platform.machine().lower() in ("x86_64", "amd64")

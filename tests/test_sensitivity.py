@@ -10,7 +10,7 @@ import pytest
 
 import jaxcrank as jc
 from optim import plots, sensitivity
-from optim.objective import Ensemble
+from optim.ensemble import Ensemble
 
 # the module's compiled Jacobians take minutes (fixtures: 138 s and 114 + 39 s on the shared 2-core machine)
 pytestmark = pytest.mark.slow
@@ -21,10 +21,8 @@ OBJ = Ensemble(
     t_end=0.004,
     window=1e-3,
     windows=2,
-    window_solver="tsit5",
-    rtol=1e-9,
-    atol=1e-9,
-    window_max_steps=20_000,
+    options=jc.SolveOptions(rtol=1e-9, atol=1e-9),
+    window_options=jc.SolveOptions.from_text("tsit5", rtol=1e-9, atol=1e-9, max_steps=20_000),
     samples_per_degree=2,
 )
 

@@ -83,7 +83,7 @@ def test_work_energy_balance_frictionless_elastic():
     # the energy residual is 1.8e-3 J (integration error: 1.3e-4 J at 1e-7, 1.8e-7 J
     # at 1e-8), so this check runs at 1e-8.
     mech = frictionless(jc.set_parameter(jc.paper(), "contact.restitution", 1.0))
-    cols = outputs.trajectory(jc.simulate(mech, REV, n_samples=1001, rtol=1e-8, atol=1e-8))
+    cols = outputs.trajectory(jc.simulate(mech, REV, n_samples=1001, options=jc.SolveOptions(rtol=1e-8, atol=1e-8)))
     bal = outputs.energy_balance(cols)
     assert abs(bal["dissipated_work_J"]) < 1e-9
     assert abs(bal["residual_J"]) < 5e-3 * abs(bal["driver_work_J"])
@@ -102,11 +102,13 @@ def test_ideal_joint_layouts(ideal_joints):
 
 def test_solver_failure_raises_with_advice():
     with pytest.raises(jc.SimulationError, match="max_steps"):
-        jc.simulate(jc.paper(), 0.01, n_samples=11, max_steps=10)
+        jc.simulate(jc.paper(), 0.01, n_samples=11, options=jc.SolveOptions(max_steps=10))
 
 
 def test_accelerations_come_from_the_vector_field():
-    sim = jc.simulate(jc.paper(), 0.002, ts=jnp.linspace(0.0, 0.002, 2001), rtol=1e-9, atol=1e-9)
+    sim = jc.simulate(
+        jc.paper(), 0.002, ts=jnp.linspace(0.0, 0.002, 2001), options=jc.SolveOptions(rtol=1e-9, atol=1e-9)
+    )
     c = outputs.trajectory(sim)
     # away from impacts, finite differences of the velocity agree with the model's acceleration
     fd = np.gradient(c["slider_vx"], c["t"])

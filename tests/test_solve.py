@@ -56,14 +56,21 @@ def test_implicit_solver_gets_the_controllers_tolerances_also_as_a_copy():
         assert (finder.rtol, finder.atol, finder.norm) == (1e-7, 1e-9, controller.norm)
 
 
-def test_the_same_solve_by_instance_by_name_and_by_options(paper):
+def test_the_same_solve_by_default_by_instance_and_by_name(paper):
     t1, n = 2e-3, 21
     by_default = jc.simulate(paper, t1, n_samples=n)
-    by_instance = jc.simulate(paper, t1, n_samples=n, solver=diffrax.Tsit5())
-    by_options = jc.simulate(paper, t1, n_samples=n, options=solve.SolveOptions(solver=diffrax.Tsit5()))
+    by_instance = jc.simulate(paper, t1, n_samples=n, options=solve.SolveOptions(solver=diffrax.Tsit5()))
+    by_name = jc.simulate(paper, t1, n_samples=n, options=solve.SolveOptions.from_text("tsit5"))
     assert tree_allclose(by_default.ys, by_instance.ys, rtol=0.0, atol=0.0)
-    assert tree_allclose(by_default.ys, by_options.ys, rtol=0.0, atol=0.0)
-    np.testing.assert_array_equal(np.asarray(by_default.ts), np.asarray(by_options.ts))
+    assert tree_allclose(by_default.ys, by_name.ys, rtol=0.0, atol=0.0)
+    np.testing.assert_array_equal(np.asarray(by_default.ts), np.asarray(by_instance.ts))
+
+
+def test_simulate_takes_its_settings_in_one_options_object(paper):
+    with pytest.raises(TypeError, match="rtol"):
+        jc.simulate(paper, 1e-3, n_samples=3, rtol=1e-8)
+    with pytest.raises(ParameterError, match="options = .* must be a SolveOptions"):
+        jc.simulate(paper, 1e-3, n_samples=3, options={"rtol": 1e-8})
 
 
 def test_tree_allclose_compares_structure_shapes_and_values():

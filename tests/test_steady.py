@@ -51,7 +51,12 @@ def periodic():
 
 def _plain_map(mech, y, tol=1e-10):
     """One revolution by plain simulate (no shooting code), works zeroed at the start."""
-    sim = jc.simulate(mech, ts=jnp.array([0.0, float(mech.period)]), y0=y.at[-2:].set(0.0), rtol=tol, atol=tol)
+    sim = jc.simulate(
+        mech,
+        ts=jnp.array([0.0, float(mech.period)]),
+        y0=y.at[-2:].set(0.0),
+        options=jc.SolveOptions(rtol=tol, atol=tol),
+    )
     return sim.ys[-1]
 
 
@@ -86,13 +91,20 @@ def test_periodic_orbit_against_finite_differences_and_long_run(periodic):
     # the orbit's start state against a long plain simulation from rest (30 revolutions;
     # the leading multiplier is below 1e-2, so its section settled to rounding long before)
     T = float(mech.period)
-    long = jc.simulate(mech, ts=jnp.arange(31.0) * T, rtol=1e-10, atol=1e-10, max_steps=5_000_000)
+    long = jc.simulate(
+        mech, ts=jnp.arange(31.0) * T, options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=5_000_000)
+    )
     assert np.max(np.abs(np.asarray(long.ys[-1, :n]) - np.asarray(y[:n]))) <= 1e-6
     # the fixed point: one more revolution returns to it
     assert np.max(np.abs(np.asarray(_plain_map(mech, y))[:n] - np.asarray(y[:n]))) <= 1e-7
     # the orbit's metrics against the same metrics of the long run's next revolution
     ref = jc.simulate(
-        mech, t1=31 * T, n_samples=31 * 3600 + 1, metrics_start=30 * T, save_samples=False, rtol=1e-10, atol=1e-10
+        mech,
+        t1=31 * T,
+        n_samples=31 * 3600 + 1,
+        metrics_start=30 * T,
+        save_samples=False,
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10),
     ).metrics
     for key in (KEY, "rms_contact_force_B_N", "peak_contact_force_C_N"):
         assert float(steady.metrics[key]) == pytest.approx(float(ref[key]), rel=1e-5)
@@ -112,31 +124,31 @@ def test_warm_start_from_a_neighbour_costs_a_few_revolutions(periodic):
 def test_newton_capped_gives_a_named_status_and_no_nan(periodic):
     mech, _ = periodic
     # Newton capped at 0 iterations on a 2-revolution settle: not converged, named
-    out = steady_state(mech, settle_revolutions=2, recurrence_tol=1e3, max_newton=0, throw=False)
+    out = steady_state(mech, jc.SteadyOptions(settle_revolutions=2, recurrence_tol=1e3, max_newton=0), throw=False)
     assert out.result == RESULTS.newton_not_converged and not out.ok
     assert np.isfinite(float(out.residual)) and float(out.residual) > 1e-7
     with pytest.raises(SteadyStateError, match="max_newton"):
-        steady_state(mech, settle_revolutions=2, recurrence_tol=1e3, max_newton=0)
+        steady_state(mech, jc.SteadyOptions(settle_revolutions=2, recurrence_tol=1e3, max_newton=0))
 
 
 def test_killed_settle_gives_a_named_status_and_no_nan(paper):
     tiny = shooting.STEADY_DEFAULTS.replace(max_steps=50)
-    out = steady_state(paper, settle_revolutions=1, options=tiny, throw=False)
+    out = steady_state(paper, jc.SteadyOptions(settle_revolutions=1, solve=tiny), throw=False)
     assert out.result == RESULTS.settle_max_steps and not out.ok
     for leaf in (out.residual, out.monodromy, out.section_state, out.lyapunov_exponent_per_s):
         assert not np.any(np.isnan(np.asarray(leaf)))
     with pytest.raises(SteadyStateError, match="max_steps"):
-        steady_state(paper, settle_revolutions=1, options=tiny)
+        steady_state(paper, jc.SteadyOptions(settle_revolutions=1, solve=tiny))
 
 
 def test_bad_arguments_name_the_parameter(paper):
     mech = paper
     with pytest.raises(jc.ParameterError, match="settle_revolutions"):
-        steady_state(mech, settle_revolutions=0)
+        steady_state(mech, jc.SteadyOptions(settle_revolutions=0))
     with pytest.raises(jc.ParameterError, match="statistics_revolutions"):
-        steady_state(mech, statistics_revolutions=3, batch_revolutions=2)
+        steady_state(mech, jc.SteadyOptions(statistics_revolutions=3, batch_revolutions=2))
     with pytest.raises(jc.ParameterError, match="newton_tol"):
-        steady_state(mech, newton_tol=-1.0)
+        steady_state(mech, jc.SteadyOptions(newton_tol=-1.0))
 
 
 def test_batch_means_interval():
@@ -151,7 +163,8 @@ def test_batch_means_interval():
 
 @pytest.mark.slow
 def test_paper_preset_is_not_periodic_with_positive_lyapunov_exponent(paper):
-    out = steady_state(paper, settle_revolutions=3, statistics_revolutions=4, samples_per_revolution=360)
+    options = jc.SteadyOptions(settle_revolutions=3, statistics_revolutions=4, samples_per_revolution=360)
+    out = steady_state(paper, options)
     assert out.ok and out.regime == "not periodic" and out.period_revolutions == 0
     assert float(out.lyapunov_exponent_per_s) > 0.0
     assert float(out.residual) > 1e-3  # the section does not recur
@@ -167,7 +180,7 @@ def test_a_design_that_settles_late_is_periodic_not_chaotic(periodic):
     and the solver shoots from its end: the orbit the default settle finds, not "not
     periodic" with a Lyapunov estimate."""
     mech, ref = periodic
-    late = steady_state(mech, settle_revolutions=1)
+    late = steady_state(mech, jc.SteadyOptions(settle_revolutions=1))
     assert late.revolutions["statistics"] > 0  # it went through the statistics run
     assert late.periodic and late.period_revolutions == ref.period_revolutions
     m = shooting.dynamic_size(mech)
@@ -196,7 +209,7 @@ def _settled(u, revolutions=30):
     state after ``revolutions``."""
     mech = _build(jnp.asarray(u))
     ts = jnp.arange(revolutions + 1.0) * float(mech.period)
-    sim = jc.simulate(mech, ts=ts, rtol=1e-10, atol=1e-10, max_steps=10_000_000)
+    sim = jc.simulate(mech, ts=ts, options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000))
     return mech, sim.ys[-1]
 
 
@@ -215,9 +228,7 @@ def _continued_value(centre, u, revolutions=10):
         y0=carry_state(old, y, mech).at[-2:].set(0.0),
         metrics_start=revolutions * T,
         save_samples=False,
-        rtol=1e-10,
-        atol=1e-10,
-        max_steps=10_000_000,
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000),
     )
     return float(sim.metrics[KEY])
 
@@ -232,7 +243,7 @@ SETTLE = 40
 def _check_gradient(u0, h=1e-3):
     """The implicit-function-theorem gradient (unit-box variables) against central
     differences (``h`` of the box) of long plain simulations."""
-    steady = steady_state(_build(jnp.asarray(u0)), settle_revolutions=SETTLE)
+    steady = steady_state(_build(jnp.asarray(u0)), jc.SteadyOptions(settle_revolutions=SETTLE))
     assert steady.periodic
     value, grad = steady_value_and_grad(lambda sim: sim.metrics[KEY], _build, jnp.asarray(u0), steady)
     centre = _settled(u0, SETTLE)
@@ -307,7 +318,11 @@ def test_period_three_orbit_against_a_long_run():
     steady = steady_state(mech)
     assert steady.periodic and steady.period_revolutions == 3 and steady.multiplier_moduli[0] < 1.0
     n = 2 * model.n_dof(mech)
-    long = jc.simulate(mech, ts=jnp.arange(81.0) * float(mech.period), rtol=1e-10, atol=1e-10, max_steps=10_000_000)
+    long = jc.simulate(
+        mech,
+        ts=jnp.arange(81.0) * float(mech.period),
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000),
+    )
     ys = np.asarray(long.ys)[:, :n]
     assert np.max(np.abs(ys[-1] - ys[-4])) <= 1e-6 < 1e-2 < np.max(np.abs(ys[-1] - ys[-2]))
     y = np.asarray(steady.section_state)[:n]
@@ -322,7 +337,7 @@ def test_the_orbit_does_not_depend_on_the_memories_the_start_up_left():
     and doubled, is the same orbit: the section within 1e-6 scaled units, Eq. 19 within
     1e-8 relative."""
     mech = _design_problem().mechanism(jnp.asarray(ADAM_RUNS_SI[0]))
-    steady = steady_state(mech, settle_revolutions=SETTLE)
+    steady = steady_state(mech, jc.SteadyOptions(settle_revolutions=SETTLE))
     assert steady.periodic and set(steady.neutral) == {"driver_work", "dissipated_work"}
     n = 2 * model.n_dof(mech)
     memories = [n + i for i, name in enumerate(model.law_state_names(mech)) if name.endswith("approach_memory")]
@@ -348,9 +363,7 @@ def _from_rest(u, revolutions=30, k=1):
         ts=jnp.linspace(0.0, (revolutions + k) * T, (revolutions + k) * 3600 + 1),
         metrics_start=revolutions * T,
         save_ts=jnp.array([revolutions * T]),
-        rtol=1e-10,
-        atol=1e-10,
-        max_steps=10_000_000,
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000),
     )
     return np.asarray(sim.ys[0]), float(sim.metrics[KEY])
 
@@ -364,9 +377,7 @@ def _continued_section(centre, u, revolutions=25):
         mech,
         ts=jnp.array([0.0, revolutions * float(mech.period)]),
         y0=carry_state(old, y, mech).at[-2:].set(0.0),
-        rtol=1e-10,
-        atol=1e-10,
-        max_steps=10_000_000,
+        options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000),
     )
     return np.asarray(sim.ys[-1])
 
@@ -520,7 +531,7 @@ def _four_bar(rpm=300.0):
 @pytest.fixture(scope="module")
 def four_bar_steady():
     mech = _four_bar()
-    return mech, steady_state(mech, samples_per_revolution=360)
+    return mech, steady_state(mech, jc.SteadyOptions(samples_per_revolution=360))
 
 
 @pytest.mark.slow
@@ -564,7 +575,7 @@ def test_four_bar_warm_start_from_a_neighbour_costs_a_few_revolutions(four_bar_s
     their bearings relative to the clearance): periodic in a few revolutions."""
     mech, steady = four_bar_steady
     neighbour = jc.set_parameter(mech, "coupler_mass", 1.01 * jc.get_parameter(mech, "coupler_mass"))
-    warm = steady_state(neighbour, warm_start=steady, samples_per_revolution=360)
+    warm = steady_state(neighbour, jc.SteadyOptions(samples_per_revolution=360), warm_start=steady)
     assert warm.periodic and float(warm.residual) <= 1e-7
     assert sum(warm.revolutions.values()) <= 6 < steady.revolutions["settle"]
 
@@ -595,7 +606,9 @@ def test_four_bar_exact_gradient_equals_differences_of_continued_runs(four_bar_s
     u0 = jnp.zeros(len(FOUR_BAR_NAMES))
     value, grad = steady_value_and_grad(lambda sim: sim.metrics[ROCKER], _four_bar_build, u0, steady)
     T, spr = float(mech.period), steady.samples_per_revolution
-    settled = jc.simulate(mech, ts=jnp.arange(21.0) * T, rtol=1e-10, atol=1e-10, max_steps=10_000_000).ys[-1]
+    settled = jc.simulate(
+        mech, ts=jnp.arange(21.0) * T, options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000)
+    ).ys[-1]
 
     def continued(u, revolutions=10):
         new = _four_bar_build(jnp.asarray(u))
@@ -607,9 +620,7 @@ def test_four_bar_exact_gradient_equals_differences_of_continued_runs(four_bar_s
             y0=carry_state(mech, settled, new).at[-2:].set(0.0),
             metrics_start=(revolutions + 0.5 / spr) * period,  # the samples after the section, as the orbit's
             save_samples=False,
-            rtol=1e-10,
-            atol=1e-10,
-            max_steps=10_000_000,
+            options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=10_000_000),
         )
         return float(sim.metrics[ROCKER])
 

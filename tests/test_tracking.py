@@ -85,33 +85,33 @@ def test_chunk_that_fits_and_the_error_for_one_that_does_not():
 
 
 def _reference_program_bytes(samples_per_degree):
-    from optim import windows as W
-    from optim.objective import Ensemble
+    from optim import ensemble as W
+    from optim.ensemble import Ensemble
 
     obj = Ensemble(t_start=0.002, t_end=0.004, window=5e-4, windows=4, samples_per_degree=samples_per_degree)
     grid = obj.grid(jc.paper())
     base = jc.paper()
     program = jax.jit(
-        lambda length: W.tracked_solve(set_parameters(base, ["rod_length"], length), grid, obj.windows, {}, False)
+        lambda length: W.tracked_solve(set_parameters(base, ["rod_length"], length), grid, obj.windows, obj.options, False)
     )
     memory = program.lower(jnp.array([0.403])).compile().memory_analysis()
     return memory.temp_size_in_bytes + memory.output_size_in_bytes
 
 
 def test_objective_solve_stores_only_the_window_starts():
-    """The design objective's forward solve (optim.objective.tracked_solve, behind the
+    """The design objective's forward solve (optim.ensemble.tracked_solve, behind the
     Eq. 19 value, sensitivities and design terms) tracks its metrics and stores the
     K window starts only: the same bytes at 1 and 100 samples per degree, and the
     same value and start states as a solve that stores every sample (to rounding)."""
-    from optim import windows as W
-    from optim.objective import Ensemble
+    from optim import ensemble as W
+    from optim.ensemble import Ensemble
 
     assert _reference_program_bytes(1) == _reference_program_bytes(100)
     obj = Ensemble(t_start=0.002, t_end=0.004, window=5e-4, windows=4)
     mech = jc.paper()
     grid = obj.grid(mech)
     n_start, n_eval, _, dt = grid
-    sim = W.tracked_solve(mech, grid, obj.windows, {}, True)
+    sim = W.tracked_solve(mech, grid, obj.windows, obj.options, True)
     assert sim.ys.shape[0] == 4
     stored = jc.simulate(mech, ts=dt * np.arange(n_start + n_eval + 1))
     idx = W.window_start_indices(grid, obj.windows)

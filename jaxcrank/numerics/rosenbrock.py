@@ -99,7 +99,7 @@ class Rodas4(diffrax.AbstractAdaptiveSolver):
     """Rodas4 (Hairer & Wanner): L-stable linearly implicit solver of order 4(3).
 
     Use like any diffrax solver with an adaptive step-size controller; in
-    jaxcrank, ``simulate(..., solver="rodas4")``. Costs per step: the Jacobian
+    jaxcrank, ``simulate(..., options=SolveOptions.from_text("rodas4"))``. Costs per step: the Jacobian
     (one batched forward-mode evaluation of the vector field), a matrix inverse
     of the state's size and five more vector-field evaluations; no Newton
     iteration, so a step never fails to converge (a poor linearisation shows up

@@ -10,11 +10,11 @@ restart at zero every map.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import diffrax
 import equinox as eqx
-import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -23,35 +23,13 @@ from jaxtyping import Array, Float
 from ..physics import model, signals
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
+from .results import RESULTS
 from .solve import Simulation, SolveOptions, simulate
 
 #: the solve settings of :func:`steady_state`: tight tolerances keep the noise of the
 #: adaptive steps in the one-revolution map (about 100 x rtol in scaled units) far below
 #: ``newton_tol``
 STEADY_DEFAULTS = SolveOptions(rtol=1e-10, atol=1e-10, max_steps=2_000_000)
-
-
-class RESULTS(eqxi.Enumeration):
-    """Outcome of [`steady_state`][jaxcrank.numerics.steady.steady_state] (``SteadyState.result``); the message says
-    what to change."""
-
-    successful = ""
-    settle_max_steps = (
-        "a revolution used all options.max_steps solver steps: raise options.max_steps, or loosen "
-        "options.rtol/atol (the section is then noisier: raise newton_tol with them)"
-    )
-    solve_failed = (
-        "a solve failed or produced non-finite values: check the contact parameters, or try "
-        "options.solver=diffrax.Kvaerno5() or tighter options.rtol/atol"
-    )
-    newton_not_converged = (
-        "Newton shooting did not reach newton_tol within max_newton iterations: raise max_newton or "
-        "settle_revolutions (a closer start), or raise newton_tol above the map's noise (about 100 x options.rtol)"
-    )
-    newton_diverged = (
-        "Newton shooting diverged (the residual grew or became non-finite): raise settle_revolutions so "
-        "the settle ends closer to the orbit, or lower recurrence_tol so that only a clear recurrence is shot"
-    )
 
 
 def section_times(mech, revolutions):
@@ -105,6 +83,62 @@ def check_arguments(
             raise ParameterError(f"{name} = {value!r} must be a finite number > 0 (scaled units: clearances)")
 
 
+@dataclasses.dataclass(frozen=True)
+class SteadyOptions:
+    """The settings of [`jaxcrank.numerics.steady.steady_state`][]: the one place their defaults live.
+
+    Attributes:
+        settle_revolutions: revolutions simulated from rest before shooting (>= 1).
+        max_period: the longest period looked for, revolutions (>= 1).
+        recurrence_tol: section points of the settle closer than this (max over the
+            dynamic entries, scaled units: clearances and clearance x crank speed) mark
+            a candidate period for shooting. When none does, the period with the closest
+            recurrence is shot if it is within 100 x ``recurrence_tol`` (an orbit still
+            settling), and a failure there means not periodic.
+        newton_tol: Newton shooting stops at ``max |Phi^k(y) - y| <= newton_tol``,
+            scaled units. Keep it above the map's noise, about 100 x ``solve.rtol``.
+        max_newton: Newton iterations at most (0: only check the settle's end).
+        statistics_revolutions: not periodic: revolutions of the Lyapunov and statistics
+            run (>= 2 batches).
+        batch_revolutions: revolutions per batch of the batch means (>= 1).
+        samples_per_revolution: sample times per revolution of the orbit and of the RMS
+            metrics (default 3600: 0.1 deg of crank angle; >= 2).
+        solve: the settings of every solve (`STEADY_DEFAULTS`: tsit5, rtol = atol = 1e-10).
+
+    Raises:
+        ParameterError: for a setting outside its range (the message names it).
+    """
+
+    settle_revolutions: int = 20
+    max_period: int = 4
+    recurrence_tol: float = 1e-3
+    newton_tol: float = 1e-7
+    max_newton: int = 8
+    statistics_revolutions: int = 10
+    batch_revolutions: int = 2
+    samples_per_revolution: int = 3600
+    solve: SolveOptions = STEADY_DEFAULTS
+
+    def __post_init__(self):
+        check_arguments(
+            self.settle_revolutions, self.max_period, self.recurrence_tol, self.newton_tol, self.max_newton,
+            self.statistics_revolutions, self.batch_revolutions, self.samples_per_revolution,
+        )  # fmt: skip
+        if not isinstance(self.solve, SolveOptions):
+            raise ParameterError(f"solve = {self.solve!r} must be a SolveOptions")
+
+    def replace(self, **changes) -> SteadyOptions:
+        """A copy with the given fields changed (``None`` values are ignored); ``solver``,
+        ``rtol``, ``atol``, ``dt0`` and ``max_steps`` change ``solve``'s."""
+        keys = ("solver", "rtol", "atol", "dt0", "max_steps")
+        solve = self.solve.replace(**{k: changes.pop(k) for k in keys if k in changes})
+        return dataclasses.replace(self, solve=solve, **{k: v for k, v in changes.items() if v is not None})
+
+
+#: the default settings of [`jaxcrank.numerics.steady.steady_state`][]
+STEADY_OPTIONS = SteadyOptions()
+
+
 def full(z):
     return jnp.concatenate([z, jnp.zeros(2, dtype=z.dtype)])
 
@@ -152,7 +186,13 @@ def period_solve(
     ts = jnp.linspace(0.0, k * mech.period, k * samples_per_revolution + 1)
     adjoint = diffrax.ForwardMode() if adjoint is None else adjoint
     return simulate(
-        mech, ts=ts, y0=y0, options=options, solver=lax_solver(options), metrics_start=0.0, throw=False, adjoint=adjoint
+        mech,
+        ts=ts,
+        y0=y0,
+        options=options.replace(solver=lax_solver(options)),
+        metrics_start=0.0,
+        throw=False,
+        adjoint=adjoint,
     )
 
 
@@ -205,7 +245,7 @@ def recurrence(section, m: int, max_period: int, tol: float) -> tuple[np.ndarray
 
 
 def failure(result):
-    if result == diffrax.RESULTS.max_steps_reached:
+    if result == RESULTS.max_steps_reached:
         return RESULTS.settle_max_steps
     return RESULTS.solve_failed
 
@@ -238,7 +278,7 @@ def shoot(mech, z, k, active, options, newton_tol, max_newton):
     best = None
     for it in range(max_newton + 1):
         out, jac, result = map_and_jacobian(mech, z, k, options)
-        if result != diffrax.RESULTS.successful:
+        if result != RESULTS.successful:
             return z, jac, active, jnp.asarray(np.inf), it, failure(result)
         if active is None:
             active = ~idle(jac) | (np.arange(z.shape[0]) < 2 * model.n_dof(mech))
@@ -291,7 +331,7 @@ def not_periodic(mech, z, options, statistics_revolutions, batch_revolutions, sa
     entries (scaled) at z and after each revolution, shape (statistics_revolutions + 1, m)."""
     _, jac, result = map_and_jacobian(mech, z, 1, options)
     counts["shooting"] += 1
-    if result != diffrax.RESULTS.successful:
+    if result != RESULTS.successful:
         return jac, failure(result), None, None, None
     v = jnp.ones_like(z) / math.sqrt(z.shape[0])
     logs, per_rev, sections = [], [], [z]
@@ -299,7 +339,7 @@ def not_periodic(mech, z, options, statistics_revolutions, batch_revolutions, sa
         z, v, metrics_, result = revolution_with_tangent(mech, z, v, options, samples)
         counts["statistics"] += 1
         norm = float(jnp.linalg.norm(v))
-        if result != diffrax.RESULTS.successful or not (math.isfinite(norm) and norm > 0):
+        if result != RESULTS.successful or not (math.isfinite(norm) and norm > 0):
             return jac, failure(result), None, None, None
         logs.append(math.log(norm))
         v = v / norm

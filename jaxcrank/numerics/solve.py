@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-from typing import Any
 
 import diffrax
 import equinox as eqx
@@ -29,6 +28,7 @@ from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
 from . import tracking
 from .linalg import DenseInverse
+from .results import RESULTS
 from .rosenbrock import Rodas4
 
 #: Solver names, for text only (TOML files, the CLI): name -> diffrax solver class.
@@ -148,7 +148,7 @@ class Simulation(eqx.Module):
         ts: sample times, s, shape (n,) (the end time alone, shape (1,), when the
             samples were not saved; the ``save_ts`` of [`simulate`][jaxcrank.numerics.solve.simulate] when given).
         ys: scaled state at those times, shape (n, state size).
-        result: diffrax result code (``diffrax.RESULTS``).
+        result: a [`RESULTS`][jaxcrank.numerics.results.RESULTS] item (diffrax's result, promoted).
         num_steps: accepted steps. num_rejected: rejected steps.
         metrics: the headline metrics tracked during the solve
             ([`jaxcrank.numerics.tracking.finish`][]: name -> value, units in the name), or
@@ -158,14 +158,14 @@ class Simulation(eqx.Module):
     mechanism: Mechanism
     ts: Float[Array, " n"]
     ys: Float[Array, "n state"]
-    result: Any
+    result: RESULTS
     num_steps: Int[Array, ""]
     num_rejected: Int[Array, ""]
     metrics: dict | None = None
 
     @property
     def ok(self):
-        return self.result == diffrax.RESULTS.successful
+        return self.result == RESULTS.successful
 
 
 def step_size_controller(solver, rtol, atol):
@@ -232,7 +232,7 @@ def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, prog
         mech,
         sol.ts,
         sol.ys,
-        sol.result,
+        RESULTS.promote(sol.result),
         sol.stats["num_accepted_steps"],
         sol.stats["num_rejected_steps"],
         tracked_metrics,
@@ -267,11 +267,6 @@ def simulate(
     n_samples=None,
     y0: Float[ArrayLike, " state"] | None = None,
     options: SolveOptions = DEFAULTS,
-    solver=None,
-    rtol=None,
-    atol=None,
-    dt0=None,
-    max_steps=None,
     adjoint=None,
     progress=False,
     throw=True,
@@ -292,13 +287,9 @@ def simulate(
         y0: scaled state at ``ts[0]`` (default
             [`jaxcrank.physics.model.initial_state`][jaxcrank.physics.state.initial_state] ,
             pins centred). Restart a run from ``sim.ys[i]`` at ``sim.ts[i]``.
-        options: the numerical settings ([`SolveOptions`][jaxcrank.numerics.solve.SolveOptions]).
-        solver: when given, replaces ``options.solver``: a diffrax solver instance, or a
-            name among `SOLVERS` (through [`solver_from_name`][jaxcrank.numerics.solve.solver_from_name]).
-        rtol: when given, replaces ``options.rtol`` (relative tolerance, scaled state, > 0).
-        atol: when given, replaces ``options.atol`` (absolute tolerance, scaled units, > 0).
-        dt0: when given, replaces ``options.dt0`` (initial step, s, > 0).
-        max_steps: when given, replaces ``options.max_steps`` (step budget, >= 1).
+        options: the numerical settings ([`SolveOptions`][jaxcrank.numerics.solve.SolveOptions]: solver,
+            rtol, atol, dt0, max_steps); change one with ``DEFAULTS.replace(rtol=1e-8)``, or
+            name the solver with ``SolveOptions.from_text("rodas4")``.
         adjoint: diffrax adjoint (default ``RecursiveCheckpointAdjoint``, exact
             reverse-mode gradients of the discrete solve). For ``jax.jacfwd`` /
             ``jax.jvp`` pass ``diffrax.ForwardMode()``: with a few parameters it is
@@ -332,9 +323,8 @@ def simulate(
         ts = sample_times(mech, t1, n_samples) if ts is None else ts
         ts = jnp.asarray(ts, dtype=float)
         span = (ts[0], ts[-1], int(ts.shape[0]))
-    if isinstance(solver, str):
-        solver = solver_from_name(solver)
-    options = options.replace(solver=solver, rtol=rtol, atol=atol, dt0=dt0, max_steps=max_steps)
+    if not isinstance(options, SolveOptions):
+        raise ParameterError(f"options = {options!r} must be a SolveOptions (jaxcrank.SolveOptions(rtol=..., ...))")
     solver, rtol, atol, dt0, max_steps = options.solver, options.rtol, options.atol, options.dt0, options.max_steps
     controller = step_size_controller(solver, rtol, atol)
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
@@ -385,19 +375,19 @@ def check(sim: Simulation, max_steps=None, t1=None) -> Simulation:
     if isinstance(finite, jax.core.Tracer):  # inside jit/grad/vmap: fail at run time
         ys = eqx.error_if(
             sim.ys,
-            sim.result != diffrax.RESULTS.successful,
+            sim.result != RESULTS.successful,
             "jaxcrank: the solve did not finish (step budget or step size); "
             "raise max_steps, loosen rtol/atol or use a smoother friction law",
         )
         ys = eqx.error_if(ys, jnp.invert(finite), "jaxcrank: the solve produced non-finite values")
         return eqx.tree_at(lambda s: s.ys, sim, ys)
-    if sim.result == diffrax.RESULTS.max_steps_reached:
+    if sim.result == RESULTS.max_steps_reached:
         raise SimulationError(
             f"the solver used all max_steps={max_steps} steps {_progress(sim, t1)}. "
             "Raise max_steps, shorten t1, loosen rtol/atol, or widen the friction ramp "
             "(friction.slip_speed - friction.stick_speed) to make the problem less stiff."
         )
-    if sim.result != diffrax.RESULTS.successful:
+    if sim.result != RESULTS.successful:
         raise SimulationError(
             f"the solve failed ({sim.result.__str__()}) {_progress(sim, t1)}. "
             "Try a tighter dt0, the implicit solver "

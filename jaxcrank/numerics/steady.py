@@ -44,7 +44,6 @@ from __future__ import annotations
 import math
 import sys
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -55,8 +54,11 @@ from ..physics import model
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
 from . import shooting
-from .shooting import RESULTS, STEADY_DEFAULTS, period_solve
+from .results import RESULTS, Regime
+from .shooting import STEADY_OPTIONS, SteadyOptions, period_solve  # noqa: F401 (SteadyOptions: also from here)
 from .solve import Simulation, SolveOptions, simulate
+
+NOT_PERIODIC = Regime.NOT_PERIODIC
 
 
 class SteadyStateError(RuntimeError):
@@ -69,8 +71,8 @@ class SteadyState(eqx.Module):
 
     Attributes:
         mechanism: the mechanism.
-        result: [`RESULTS`][jaxcrank.numerics.shooting.RESULTS] item (``RESULTS.successful`` unless the solver failed).
-        regime: ``"periodic"`` or ``"not periodic"``.
+        result: [`RESULTS`][jaxcrank.numerics.results.RESULTS] item (``RESULTS.successful`` unless the solver failed).
+        regime: [`Regime`][jaxcrank.numerics.results.Regime] ``PERIODIC`` or ``NOT_PERIODIC``.
         period_revolutions: k, the period in crank revolutions (0 when not periodic).
         residual: ``max |Phi^k(y*) - y*|`` over the dynamic subspace, scaled units (the
             recurrence distance of the settle's last section points when not periodic).
@@ -103,7 +105,7 @@ class SteadyState(eqx.Module):
 
     mechanism: Mechanism
     result: RESULTS
-    regime: str = eqx.field(static=True)
+    regime: Regime = eqx.field(static=True)
     period_revolutions: int = eqx.field(static=True)
     residual: Float[Array, ""]
     newton_iterations: int = eqx.field(static=True)
@@ -127,7 +129,7 @@ class SteadyState(eqx.Module):
 
     @property
     def periodic(self) -> bool:
-        return self.ok and self.regime == "periodic"
+        return self.ok and self.regime == Regime.PERIODIC
 
     @property
     def multiplier_moduli(self) -> np.ndarray:
@@ -181,47 +183,25 @@ def _warm_state(mech, warm):
 
 def steady_state(
     mech: Mechanism,
+    options: SteadyOptions = STEADY_OPTIONS,
     *,
-    settle_revolutions: int = 20,
-    max_period: int = 4,
-    recurrence_tol: float = 1e-3,
-    newton_tol: float = 1e-7,
-    max_newton: int = 8,
     warm_start=None,
-    statistics_revolutions: int = 10,
-    batch_revolutions: int = 2,
-    samples_per_revolution: int = 3600,
-    options: SolveOptions = STEADY_DEFAULTS,
     throw: bool = True,
     progress: bool = False,
 ) -> SteadyState:
     """The steady state of ``mech``: its periodic orbit and stability, or, when it has no
-    attracting periodic orbit of period <= ``max_period``, its Lyapunov exponent and
-    long-run statistics (module docstring).
+    attracting periodic orbit of period <= ``options.max_period``, its Lyapunov exponent
+    and long-run statistics (module docstring).
 
     Args:
         mech: the mechanism.
-        settle_revolutions: revolutions simulated from rest before shooting (>= 1).
-        max_period: the longest period looked for, revolutions (>= 1).
-        recurrence_tol: section points of the settle closer than this (max over the
-            dynamic entries, scaled units: clearances and clearance x crank speed) mark
-            a candidate period for shooting. When none does, the period with the closest
-            recurrence is shot if it is within 100 x ``recurrence_tol`` (an orbit still
-            settling), and a failure there means not periodic.
-        newton_tol: Newton shooting stops at ``max |Phi^k(y) - y| <= newton_tol``,
-            scaled units. Keep it above the map's noise, about 100 x ``options.rtol``.
-        max_newton: Newton iterations at most (0: only check the settle's end).
+        options: the settings ([`SteadyOptions`][jaxcrank.numerics.shooting.SteadyOptions]: settle, period search,
+            Newton shooting, statistics, and the solves' ``SolveOptions``), e.g.
+            ``SteadyOptions(settle_revolutions=40)`` or ``SteadyOptions().replace(rtol=1e-9)``.
         warm_start: a previous [`SteadyState`][jaxcrank.numerics.steady.SteadyState] (its pin-in-bearing state is
-            carried
-            over to ``mech`` physically; a periodic one also gives the period to shoot,
-            after one period of settle) or a scaled state at t = 0. When shooting from it
-            fails, the solver settles ``settle_revolutions`` from there and starts over.
-        statistics_revolutions: not periodic: revolutions of the Lyapunov and statistics
-            run (>= 2 batches).
-        batch_revolutions: revolutions per batch of the batch means.
-        samples_per_revolution: sample times per revolution of the orbit and of the RMS
-            metrics (default 3600: 0.1 deg of crank angle).
-        options: solve settings (`STEADY_DEFAULTS`: rtol = atol = 1e-10).
+            carried over to ``mech`` physically; a periodic one also gives the period to
+            shoot, after one period of settle) or a scaled state at t = 0. When shooting
+            from it fails, the solver settles ``settle_revolutions`` from there and starts over.
         throw: raise [`SteadyStateError`][jaxcrank.numerics.steady.SteadyStateError] when the result is not
             ``RESULTS.successful``; with ``False`` inspect ``SteadyState.result``.
         progress: report each phase on standard error (settle with a progress bar,
@@ -231,26 +211,25 @@ def steady_state(
         a [`SteadyState`][jaxcrank.numerics.steady.SteadyState].
 
     Raises:
-        ParameterError: for an argument outside its range (the message names it).
+        ParameterError: for options that are not a ``SteadyOptions``, or a driver that is not periodic.
         SteadyStateError: with ``throw=True``, when a solve or the shooting failed.
     """
-    shooting.check_arguments(
-        settle_revolutions, max_period, recurrence_tol, newton_tol, max_newton, statistics_revolutions,
-        batch_revolutions, samples_per_revolution,
-    )  # fmt: skip
+    if not isinstance(options, SteadyOptions):
+        raise ParameterError(f"options = {options!r} must be a SteadyOptions (jaxcrank.SteadyOptions(...))")
+    o = options
     shooting.check_periodic_driver(mech)
     counts = {"settle": 0, "shooting": 0, "orbit": 0, "statistics": 0}
     y0 = model.initial_state(mech) if warm_start is None else _warm_state(mech, warm_start)
     warm_k = warm_start.period_revolutions if isinstance(warm_start, SteadyState) and warm_start.periodic else 0
     say = _say if progress else (lambda text: None)
     out = _steady(
-        mech, y0, warm_k, settle_revolutions, max_period, recurrence_tol, newton_tol, max_newton,
-        statistics_revolutions, batch_revolutions, samples_per_revolution, options, counts, say,
+        mech, y0, warm_k, o.settle_revolutions, o.max_period, o.recurrence_tol, o.newton_tol, o.max_newton,
+        o.statistics_revolutions, o.batch_revolutions, o.samples_per_revolution, o.solve, counts, say,
     )  # fmt: skip
     if throw and out.result != RESULTS.successful:
         raise SteadyStateError(
             f"steady_state failed after {out.newton_iterations} Newton iterations (residual "
-            f"{float(out.residual):.3g} scaled units, newton_tol {newton_tol:g}): {RESULTS[out.result]}"
+            f"{float(out.residual):.3g} scaled units, newton_tol {o.newton_tol:g}): {RESULTS[out.result]}"
         )
     return out
 
@@ -275,9 +254,9 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         monodromy=jnp.zeros((m, m)), active=np.ones(m, bool), floquet_multipliers=jnp.zeros(0, complex),
         neutral=(), section_state=section[-1].at[-2:].set(0.0), options=options, samples_per_revolution=samples,
     )  # fmt: skip
-    if sim.result != diffrax.RESULTS.successful or not bool(jnp.all(jnp.isfinite(section))):
+    if sim.result != RESULTS.successful or not bool(jnp.all(jnp.isfinite(section))):
         return SteadyState(
-            result=shooting.failure(sim.result), regime="not periodic", residual=jnp.asarray(np.inf), **empty
+            result=shooting.failure(sim.result), regime=NOT_PERIODIC, residual=jnp.asarray(np.inf), **empty
         )
     z_end = section[-1, :m]
     distances = {}
@@ -305,14 +284,14 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
                 return _steady(mech, section[-1], 0, settle, max_period, recurrence_tol, newton_tol, max_newton,
                                n_stats, batch, samples, options, counts, say)  # fmt: skip
             result, res, its = failure
-            return SteadyState(result=result, regime="not periodic", residual=res, **dict(empty, newton_iterations=its))
+            return SteadyState(result=result, regime=NOT_PERIODIC, residual=res, **dict(empty, newton_iterations=its))
     recurrence = float(jnp.max(jnp.abs(z_end - section[-2, :m])))
     say(f"no period up to {max_period} revolution(s): Lyapunov exponent and statistics over {n_stats} revolutions")
     jac, result, lyapunov, statistics, sections = shooting.not_periodic(
         mech, z_end, options, n_stats, batch, samples, counts
     )
     if result != RESULTS.successful:
-        return SteadyState(result=result, regime="not periodic", residual=jnp.asarray(recurrence), **empty)
+        return SteadyState(result=result, regime=NOT_PERIODIC, residual=jnp.asarray(recurrence), **empty)
     z_last = sections[-1]
     # a late settler: the statistics run's own section points recur, so shoot from its end
     late = shooting.recurrence(sections, m, max_period, recurrence_tol)[1].tolist()
@@ -333,7 +312,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         neutral=_neutral_names(mech, active),
         lyapunov_exponent_per_s=jnp.asarray(lyapunov),
     )
-    return SteadyState(result=RESULTS.successful, regime="not periodic", residual=jnp.asarray(recurrence), **fields)
+    return SteadyState(result=RESULTS.successful, regime=NOT_PERIODIC, residual=jnp.asarray(recurrence), **fields)
 
 
 def _shoot(mech, z, k, newton_tol, max_newton, samples, options, counts, say, empty):
@@ -354,7 +333,7 @@ def _shoot(mech, z, k, newton_tol, max_newton, samples, options, counts, say, em
     orbit = period_solve(mech, shooting.full(z), k, options=options, samples_per_revolution=samples)
     counts["orbit"] += k
     if not orbit.ok:
-        return SteadyState(result=shooting.failure(orbit.result), regime="not periodic", residual=res, **empty)
+        return SteadyState(result=shooting.failure(orbit.result), regime=NOT_PERIODIC, residual=res, **empty)
     fields = dict(empty, period_revolutions=k, newton_iterations=its, orbit=orbit, monodromy=jac, active=active)
     fields.update(
         metrics={key: v for key, v in orbit.metrics.items() if key != "window_start_s"},
@@ -363,7 +342,7 @@ def _shoot(mech, z, k, newton_tol, max_newton, samples, options, counts, say, em
         section_state=shooting.full(z),
         lyapunov_exponent_per_s=jnp.asarray(math.log(max(lead, 1e-300)) / (k * float(mech.period))),
     )
-    return SteadyState(result=RESULTS.successful, regime="periodic", residual=res, **fields)
+    return SteadyState(result=RESULTS.successful, regime=Regime.PERIODIC, residual=res, **fields)
 
 
 @eqx.filter_custom_jvp

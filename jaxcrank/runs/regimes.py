@@ -75,18 +75,19 @@ import numpy as np
 from jaxtyping import ArrayLike, Float, Shaped
 from tqdm.auto import tqdm
 
-from ..numerics import shooting
+from ..numerics import results, shooting
+from ..numerics.results import RESULTS, Regime
 from ..numerics.shooting import STEADY_DEFAULTS
 from ..numerics.solve import SolveOptions
 from ..physics import model
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.parameters import set_parameters
 from ..physics.params import ParameterError
-from .sweep_design import MESSAGES, STATUSES, split_valid
+from .sweep_design import STATUSES, split_valid
 from .sweep_table import append, atomic_write, csv_text, open_table, parameter_columns, read_table, table_from_rows
 
 #: the regimes (``""``: the design failed or is invalid)
-REGIMES = ("periodic", "not periodic")
+REGIMES = (Regime.PERIODIC, Regime.NOT_PERIODIC)
 #: the text columns of a regime table
 TEXT_COLUMNS = ("status", "message", "regime")
 _TAIL = ["status", "message", "regime", "period_revolutions", "recurrence_distance_scaled", "steps"]
@@ -134,7 +135,7 @@ def resolve_engine(engine: str | None, options: SolveOptions = STEADY_DEFAULTS, 
 def kernel_sections(base, names, xs, revolutions, options=STEADY_DEFAULTS, threads=None):
     """Section points of designs ``xs`` (n, len(names)) by the kernel, one call per
     revolution. Returns (sections (n, revolutions + 1, state) scaled, NaN after a
-    failure; status codes (n,) as `STATUSES` numbers them; accepted steps (n,)). A
+    failure; status codes (n,) of [`jaxcrank.numerics.results.RESULTS`][]; accepted steps (n,)). A
     design whose settle uses more than ``options.max_steps`` steps (accepted and
     rejected, over all revolutions) gets ``max_steps``."""
     from ..numerics.kernel import engine, source
@@ -164,7 +165,6 @@ def kernel_sections(base, names, xs, revolutions, options=STEADY_DEFAULTS, threa
 
 
 def _xla_settle(base, names, x, revolutions, options):
-    import diffrax
     import jax.numpy as jnp
 
     from ..numerics.solve import simulate
@@ -173,11 +173,7 @@ def _xla_settle(base, names, x, revolutions, options):
     ts = shooting.section_times(mech, revolutions)
     sim = simulate(mech, ts=ts, y0=model.initial_state(mech), options=options, throw=False)
     finite = jnp.all(jnp.isfinite(sim.ys))
-    status = jnp.where(
-        sim.result == diffrax.RESULTS.successful,
-        jnp.where(finite, 0, 3),
-        jnp.where(sim.result == diffrax.RESULTS.max_steps_reached, 1, 2),
-    )
+    status = jnp.where(sim.ok & jnp.invert(finite), results.code(RESULTS.non_finite), results.code(sim.result))
     return sim.ys, status, sim.num_steps
 
 
@@ -296,9 +292,9 @@ def classify(
             period, distances = shooting.recurrence(sections, m, max_period, recurrence_tol)
             new = []
             for j, i in enumerate(idx):
-                st = STATUSES[int(status[j])]
+                st = results.status_label(status[j])
                 if st != "ok":
-                    new.append(row(i, st, MESSAGES.get(st, ""), steps=int(steps[j])))
+                    new.append(row(i, st, results.message(status[j]), steps=int(steps[j])))
                     continue
                 k = int(period[j])
                 regime = REGIMES[0] if k else REGIMES[1]

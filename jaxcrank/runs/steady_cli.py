@@ -9,7 +9,7 @@ import json
 import time
 from pathlib import Path
 
-from ..numerics.shooting import STEADY_DEFAULTS
+from ..numerics.shooting import STEADY_DEFAULTS, SteadyOptions
 from ..numerics.solve import SOLVERS, solver_from_name
 from ..physics.params import ParameterError
 from . import config
@@ -164,24 +164,23 @@ def run(args) -> int:
     mech = config.mechanism_from_arguments(args)
     if not (args.newton_tol > 0):
         raise ParameterError(f"--newton-tol = {args.newton_tol:g} must be > 0")
-    out = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    config.save(mech, out / "config.toml")
-    options = STEADY_DEFAULTS.replace(
+    solve = STEADY_DEFAULTS.replace(
         solver=solver_from_name(args.solver), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
     )
-    start = time.perf_counter()
-    steady = steady_state(
-        mech,
+    options = SteadyOptions(
         settle_revolutions=args.settle_revolutions,
         max_period=args.max_period,
         newton_tol=args.newton_tol,
         statistics_revolutions=args.statistics_revolutions,
         batch_revolutions=args.batch_revolutions,
         samples_per_revolution=args.samples_per_revolution,
-        options=options,
-        progress=not args.quiet,
+        solve=solve,
     )
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    config.save(mech, out / "config.toml")
+    start = time.perf_counter()
+    steady = steady_state(mech, options, progress=not args.quiet)
     wall = time.perf_counter() - start
     data = summary(steady, wall, args)
     (out / "summary.json").write_text(json.dumps(data, indent=2))

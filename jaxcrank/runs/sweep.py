@@ -68,10 +68,10 @@ import numpy as np
 from jaxtyping import ArrayLike, Float, Shaped
 from tqdm.auto import tqdm
 
+from ..numerics import results
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
 from .sweep_design import (
-    MESSAGES,
     SOLVE_KEYS,
     STATUSES,
     Settings,
@@ -226,8 +226,8 @@ def run(
         metrics, status, steps = result
         new = []
         for j, i in enumerate(idx):
-            st = STATUSES[int(status[j])]
-            new.append(row(i, st, MESSAGES.get(st, ""), metrics[j] if st == "ok" else None, int(steps[j])))
+            st = results.status_label(status[j])
+            new.append(row(i, st, results.message(status[j]), metrics[j] if st == "ok" else None, int(steps[j])))
         emit(new)
         bar.update(len(idx))
 

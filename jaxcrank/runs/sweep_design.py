@@ -1,5 +1,7 @@
 """One design of a sweep: how it is simulated ([`SweepSettings`][jaxcrank.runs.sweep_design.SweepSettings]), its solve
-([`simulate_design`][jaxcrank.runs.sweep_design.simulate_design]) and its status codes (`STATUSES`)."""
+([`simulate_design`][jaxcrank.runs.sweep_design.simulate_design]) and its status: a code of
+[`jaxcrank.numerics.results.RESULTS`][], labelled in tables by
+[`status_label`][jaxcrank.numerics.results.status_label]."""
 
 from __future__ import annotations
 
@@ -7,11 +9,12 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 
-import diffrax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from ..numerics import results
+from ..numerics.results import RESULTS
 from ..numerics.solve import DEFAULTS, SolveOptions, simulate
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.parameters import set_parameters
@@ -19,14 +22,8 @@ from ..physics.params import ParameterError
 from ..physics.signals import metric_definitions
 from . import config
 
-#: Status of a design in a sweep table; :func:`simulate_design` returns an index into it.
-STATUSES = ("ok", "max_steps", "solver_failed", "non_finite", "invalid")
-#: What a failed design's ``message`` cell says, per status.
-MESSAGES = {
-    "max_steps": "the solver used its whole step budget: raise max_steps, shorten the run or loosen rtol/atol",
-    "solver_failed": "the solve failed (step size): try solver='kvaerno5' or check the contact parameters",
-    "non_finite": "the solve produced non-finite values: check stiffness, memory_time and tolerances",
-}
+#: the labels of a sweep table's ``status`` column
+STATUSES = results.STATUSES
 
 
 def metric_names(mech: Mechanism) -> tuple[str, ...]:
@@ -131,8 +128,9 @@ def simulate_design(
 ) -> tuple[dict[str, Float[Array, ""]], Int[Array, ""], Int[Array, ""]]:
     """One design: ``base`` with ``names`` set to ``x`` (SI), simulated with
     ``throw=False``. Returns (metrics dict in the order of
-    [`metric_names`][jaxcrank.runs.sweep_design.metric_names], status code (index into
-    `STATUSES`), accepted steps). Traceable; `run` vmaps it."""
+    [`metric_names`][jaxcrank.runs.sweep_design.metric_names], status code (of
+    [`jaxcrank.numerics.results.RESULTS`][]: the solve's result, or ``non_finite``), accepted
+    steps). Traceable; `run` vmaps it."""
     settings = SweepSettings() if settings is None else settings
     mech = set_parameters(base, names, x)
     # metrics tracked during the solve: no sample is stored (memory per design is
@@ -148,9 +146,7 @@ def simulate_design(
     )
     m = {k: sim.metrics[k] for k in metric_names(mech)}
     finite = jnp.all(jnp.isfinite(sim.ys)) & jnp.all(jnp.isfinite(jnp.stack(list(m.values()))))
-    status = jnp.where(
-        sim.ok, jnp.where(finite, 0, 3), jnp.where(sim.result == diffrax.RESULTS.max_steps_reached, 1, 2)
-    )
+    status = jnp.where(sim.ok & jnp.invert(finite), results.code(RESULTS.non_finite), results.code(sim.result))
     return m, status, sim.num_steps
 
 

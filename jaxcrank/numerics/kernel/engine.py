@@ -4,8 +4,8 @@
 [`jaxcrank.runs.sweep.simulate_design`][jaxcrank.runs.sweep_design.simulate_design] over many designs: each design's
 adaptive
 tsit5 solve from the pins-centred start, with the headline metrics accumulated in the
-kernel, and the same status codes (`jaxcrank.runs.sweep.STATUSES` order: 0 ok,
-1 max_steps, 3 non_finite). Designs are independent: one per thread, each with its
+kernel, and the same status codes ([`jaxcrank.numerics.results.RESULTS`][]: ``successful``,
+``max_steps_reached``, ``non_finite``). Designs are independent: one per thread, each with its
 own steps, so a design's numbers do not depend on its batch mates, the batch size or
 the thread count.
 """
@@ -22,10 +22,11 @@ import numpy as np
 from ...physics.linkage import AbstractMechanism as Mechanism
 from ...physics.parameters import set_parameters
 from ...physics.params import ParameterError
+from ..results import RESULTS, code
 from . import build, source
 
-#: status codes, as :data:`jaxcrank.runs.sweep.STATUSES` numbers them
-OK, MAX_STEPS, NON_FINITE = 0, 1, 3
+#: the status codes the kernel returns (codes of [`jaxcrank.numerics.results.RESULTS`][])
+OK, MAX_STEPS, NON_FINITE = (int(code(i)) for i in (RESULTS.successful, RESULTS.max_steps_reached, RESULTS.non_finite))
 
 
 class Batch(NamedTuple):
@@ -34,7 +35,7 @@ class Batch(NamedTuple):
     Attributes:
         metrics: (n, metrics) in the order of the structure's metrics
             ([`jaxcrank.numerics.kernel.source.names`][]), units in the names.
-        status: (n,) status codes (0 ok, 1 max_steps, 3 non_finite).
+        status: (n,) status codes (`OK`, `MAX_STEPS` or `NON_FINITE`).
         steps: (n,) accepted steps. rejected: (n,) rejected steps.
         y: (n, state) scaled state at the end (where the solve stopped).
         whole_run_peaks: (n, peak metrics) peaks over the whole run, not only the window.
