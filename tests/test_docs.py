@@ -190,3 +190,14 @@ def test_the_design_study_tutorial_files_are_what_its_commands_read():
     assert isinstance(settings.guard, RegimeGuard) and type(problem.objective).__name__ == "Steady"
     parsed = spec_from_dict(spec, base=jc.paper())
     assert list(parsed.metrics) == ["rms_transmission_angle_error_deg", "peak_contact_force_C_N"]
+
+
+def test_code_blocks_wrap_instead_of_running_past_the_text_column():
+    """Long lines in code blocks (the install command, config comments) wrap: the site's
+    stylesheet sets it and mkdocs.yml loads it. docs/check_pages.py measures it in a
+    browser (every code block no wider than its box, at 1280 and 390 px)."""
+    cfg = (ROOT / "mkdocs.yml").read_text()
+    assert re.search(r"extra_css:\n\s+- stylesheets/extra\.css", cfg)
+    css = (ROOT / "docs" / "stylesheets" / "extra.css").read_text()
+    rule = re.search(r"\.md-typeset pre > code,?[^{]*\{([^}]*)\}", css)
+    assert rule and "white-space: pre-wrap" in rule.group(1)
