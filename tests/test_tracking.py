@@ -91,9 +91,11 @@ def _reference_program_bytes(samples_per_degree):
     obj = Ensemble(t_start=0.002, t_end=0.004, window=5e-4, windows=4, samples_per_degree=samples_per_degree)
     grid = obj.grid(jc.paper())
     base = jc.paper()
-    program = jax.jit(
-        lambda length: W.tracked_solve(set_parameters(base, ["rod_length"], length), grid, obj.windows, obj.options, False)
-    )
+
+    def solve(length):
+        return W.tracked_solve(set_parameters(base, ["rod_length"], length), grid, obj.windows, obj.options, False)
+
+    program = jax.jit(solve)
     memory = program.lower(jnp.array([0.403])).compile().memory_analysis()
     return memory.temp_size_in_bytes + memory.output_size_in_bytes
 
