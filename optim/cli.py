@@ -55,16 +55,16 @@ from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
 
 from .objective import objective_config, objective_from_config
-from .optimize import Settings, optimize
+from .optimize import STEADY_LEARNING_RATE, Settings, optimize
 from .optimizers import OPTIMIZERS, from_settings
 from .presets import PROBLEMS, paper_reference
 from .problem import AbstractProblem as Problem
 from .starts import multistart, periodic_start
 from .steady import RegimeGuard, Steady
 
-#: the default ``[optimizer]`` settings with the steady-state objective (chosen by the design
-#: head-to-head over a family of problems, docs/design-studies.md)
-STEADY_OPTIMIZER = {"method": "adam", "learning_rate": 0.05}
+#: the default ``[optimizer]`` settings with the steady-state objective (those of
+#: [`optim.optimize.default_settings`][], with the regime guard)
+STEADY_OPTIMIZER = {"method": "adam", "learning_rate": STEADY_LEARNING_RATE}
 GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
 
 

@@ -48,7 +48,11 @@ from . import quasi_newton as qn
 from .objective import value_and_grad
 from .optimizers import LBFGS, AbstractLineSearchOptimizer, AbstractOptimizer, adam
 from .problem import AbstractProblem
-from .steady import NOT_PERIODIC, Steady, SteadyEvaluator, not_periodic_reason
+from .steady import NOT_PERIODIC, RegimeGuard, Steady, SteadyEvaluator, not_periodic_reason
+
+#: Adam's step (scaled design units) in the steady-state objective's default settings, chosen by
+#: the design head-to-head over a family of problems (docs/design-studies.md)
+STEADY_LEARNING_RATE = 0.05
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +96,15 @@ class Settings:
             raise ParameterError("max_iterations must be >= 1, gtol and xtol >= 0")
         if not (isinstance(self.starts, int) and self.starts >= 1):
             raise ParameterError(f"starts = {self.starts!r} must be an integer >= 1")
+
+
+def default_settings(problem: AbstractProblem) -> Settings:
+    """The settings [`optimize`][optim.optimize.optimize] uses when given none: for the steady-state
+    objective, Adam at `STEADY_LEARNING_RATE` with the regime guard (steps stay in the periodic
+    regime, where the gradient is exact); ``Settings()`` otherwise."""
+    if isinstance(problem.objective, Steady):
+        return Settings(optimizer=adam(STEADY_LEARNING_RATE), guard=RegimeGuard())
+    return Settings()
 
 
 @functools.lru_cache(maxsize=8)
@@ -173,7 +186,7 @@ def _checked(problem: AbstractProblem, u, value, grad):
 
 def optimize(
     problem: AbstractProblem,
-    settings: Settings = Settings(),
+    settings: Settings | None = None,
     out: Path | None = None,
     resume: bool = False,
     progress: bool = True,
@@ -183,6 +196,10 @@ def optimize(
     """Minimise ``problem`` from its start design.
 
     Args:
+        settings: the optimiser settings (default [`default_settings`][optim.optimize.default_settings]).
+            With none given, a steady-state objective, no ``evaluator`` and no ``resume``, the run first
+            finds a periodic start ([`optim.starts.periodic_start`][]: the problem's start, then Sobol
+            points), since the gradient is exact only in the periodic regime.
         out: run directory for ``checkpoint.npz`` and ``history.csv`` (no checkpoints when None).
         resume: continue from ``out``'s checkpoint (error if there is none).
         stop_after: stop (as if killed) after this many iterations of this call (tests).
@@ -198,8 +215,17 @@ def optimize(
     degrees), ``final`` (the best SI design of the history), ``final_objective`` (its objective, degrees),
     ``last`` (the last iterate, SI) and ``seconds`` (wall time, s: ``start``, the start's evaluation, and
     ``iterations``, the iterations of this call; steady-state objective: ``gradient_compile``, the part of
-    both spent compiling gradient programs).
+    both spent compiling gradient programs), and ``start_search`` when the run looked for a periodic start
+    ([`optim.starts.StartSearch.describe`][]; its classification time in ``seconds["start_search"]``).
     """
+    found = None
+    if settings is None:
+        settings = default_settings(problem)
+        if isinstance(problem.objective, Steady) and evaluator is None and not resume:
+            from .starts import periodic_start
+
+            found = periodic_start(problem, seed=settings.seed, progress=progress)
+            problem, evaluator = found.problem, found.evaluator
     opt = settings.optimizer
     penalty = getattr(opt, "penalty", 10.0)
     # the start is not part of the compiled programs: runs from other starts share them
@@ -338,7 +364,9 @@ def optimize(
             "start": start_seconds,
             "iterations": time.perf_counter() - started,
             **({"gradient_compile": evaluator.compile_seconds - compiled_before} if evaluator is not None else {}),
+            **({"start_search": found.seconds} if found is not None else {}),
         },
+        **({"start_search": found.describe()} if found is not None else {}),
     }
 
 

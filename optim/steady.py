@@ -292,8 +292,9 @@ def not_periodic_reason(problem, x) -> str:
     design = ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, np.asarray(x)))
     return (
         f"not periodic at {design}: the steady-state gradient there is exactly zero (no trend estimate), which "
-        "says nothing about optimality; start from a periodic design (classify starts with "
-        "SteadyEvaluator.regime_at) or give Steady a trend objective (Steady(trend=Ensemble()))"
+        "says nothing about optimality; start from a periodic design (optim.starts.periodic_start finds one; "
+        "optimize(problem) with no settings runs it first; jaxcrank optimize does with one start) or give Steady "
+        "a trend objective (Steady(trend=Ensemble()))"
     )
 
 

@@ -81,3 +81,33 @@ def test_count_below_one_is_refused():
 
     with pytest.raises(ParameterError, match="starts = 0"):
         periodic_start(steady_problem(), count=0, evaluator=_Evaluator(steady_problem()), progress=False)
+
+
+def test_optimize_with_no_settings_finds_a_periodic_start_and_keeps_to_the_periodic_regime(monkeypatch):
+    """The library's way in from the defaults: ``optimize(problem)`` with a steady-state objective
+    and no settings classifies starts first (one evaluator, carried into the run), then runs Adam at
+    STEADY_LEARNING_RATE with the regime guard; every design it evaluates is periodic and the result
+    names the search."""
+    from optim import optimize as O
+
+    made = _patch(monkeypatch)
+    monkeypatch.setattr("optim.starts.SteadyEvaluator", lambda problem: made.append(_Evaluator(problem)) or made[-1])
+    prob = _start(steady_problem(), [0.1, 0.1, 0.9])  # not periodic: a zero gradient there
+    settings = O.default_settings(prob)
+    assert settings.optimizer.label == "adam" and isinstance(settings.guard, RegimeGuard)
+    res = optimize(prob, progress=False)
+    assert len(made) == 1  # the search's evaluator is the run's
+    search = res["start_search"]
+    assert search["periodic"] and search["chosen"] > 0 and "start_search" in res["seconds"]
+    ev = made[0]
+    assert ev.evaluated and all(ev.periodic(u) for u in ev.evaluated)
+    assert res["history"][-1]["objective_deg"] < res["f0"]
+
+
+def test_given_settings_run_from_the_problem_start_as_given(monkeypatch):
+    """Settings given: no start search (the caller chose), the problem's own start is evaluated first."""
+    made = _patch(monkeypatch)
+    prob = steady_problem()
+    res = optimize(prob, Settings(max_iterations=2), progress=False)
+    assert "start_search" not in res and len(made) == 1
+    np.testing.assert_allclose(made[0].evaluated[0], np.asarray(prob.start_unit()), atol=1e-12)
