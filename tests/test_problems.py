@@ -249,6 +249,43 @@ def test_steady_objective_config_round_trip():
         build({"problem": "paper", "optimizer": {"method": "lbfgs", "learning_rate": 0.1}})
 
 
+@pytest.mark.parametrize(
+    "table",
+    [
+        {"method": "pathwise", "t_end": 0.2, "solver": "kvaerno5", "max_steps": 1000},
+        {
+            "method": "ensemble",
+            "rtol": 1e-8,
+            "window_solver": "tsit5",
+            "window_max_steps": 200,
+            "window_gradient": "reverse",
+        },
+        {"method": "steady_state", "settle_revolutions": 12, "newton_tol": 1e-6, "atol": 1e-9, "on_failure": "nan"},
+    ],
+)
+def test_objective_tables_map_flat_keys_onto_the_options_objects_and_round_trip(table):
+    """An [objective] table's flat keys set the objective's SolveOptions (an ensemble's windows
+    through window_*, following the solve's rtol/atol unless given; a steady state's SteadyOptions),
+    and objective_config writes a table that builds the same objective."""
+    import diffrax
+
+    from optim.objective import objective_config, objective_from_config
+
+    obj = objective_from_config(table)
+    assert objective_from_config(objective_config(obj)) == obj
+    if table["method"] == "pathwise":
+        assert isinstance(obj.options.solver, diffrax.Kvaerno5) and obj.options.max_steps == 1000
+    elif table["method"] == "ensemble":
+        assert obj.options.rtol == obj.window_options.rtol == 1e-8 and obj.window_options.max_steps == 200
+        assert isinstance(obj.window_options.solver, diffrax.Tsit5) and not obj.forward_mode()
+    else:
+        o = obj.options
+        assert (o.settle_revolutions, o.newton_tol, o.solve.atol, o.solve.rtol) == (12, 1e-6, 1e-9, 1e-10)
+        assert o.max_period == 2 and not obj.throw  # the objective's defaults kept
+    with pytest.raises(ParameterError, match=r"unknown \[objective\] keys \['bogus'\]; valid: \[.*'rtol'"):
+        objective_from_config({**table, "bogus": 1})
+
+
 def test_the_design_config_chooses_a_subset_of_its_variables_by_name():
     """``[design] variables``: the design problem with those variables at their default bounds
     (the others fixed at their start values); a resume reads the same problem back; a name it does
