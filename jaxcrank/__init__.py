@@ -23,53 +23,76 @@ Each module is also reachable by its short name (``jaxcrank.outputs``,
 those not imported here load on first use.
 """
 
+import os
+import sys
 from importlib.metadata import PackageNotFoundError, version
-
-import jax
+from typing import TYPE_CHECKING
 
 from .numerics import runtime
 
 runtime.configure()  # before anything starts JAX's backend: XLA reads XLA_FLAGS once
-jax.config.update("jax_enable_x64", True)
+if "jax" in sys.modules:  # already imported: switch it to float64 now
+    sys.modules["jax"].config.update("jax_enable_x64", True)
+else:  # JAX reads this when it is imported (importing it here would delay the first output of every command)
+    os.environ["JAX_ENABLE_X64"] = "1"
 
-from .analysis import metrics, outputs  # noqa: E402
-from .errors import CorruptFileError  # noqa: E402
-from .numerics import solve  # noqa: E402
-from .numerics.results import RESULTS, Regime  # noqa: E402
-from .numerics.shooting import SteadyOptions  # noqa: E402
-from .numerics.solve import (  # noqa: E402
-    DEFAULTS,
-    SOLVERS,
-    Simulation,
-    SimulationError,
-    SolveOptions,
-    simulate,
-    solver_from_name,
-)
-from .numerics.steady import SteadyState, SteadyStateError, steady_state  # noqa: E402
-from .physics import ideal, laws, model, params, presets  # noqa: E402
-from .physics.joints import JOINT_LAWS, Clearance, Ideal  # noqa: E402
-from .physics.laws import CONTACT_LAWS, FRICTION_LAWS  # noqa: E402
-from .physics.linkage import (  # noqa: E402
-    AbstractMechanism,
-    Body,
-    BodyVector,
-    ConstantSpeed,
-    Linkage,
-    Outputs,
-    Point,
-    Pose,
-    Prismatic,
-    Revolute,
-    Site,
-    SpeedProfile,
-    Torque,
-)
-from .physics.memory import MEMORY_LAWS, FrozenMemory  # noqa: E402
-from .physics.parameters import get_parameter, parameter_value, set_parameter, set_parameters  # noqa: E402
-from .physics.params import Contact, Friction, Material, ParameterError  # noqa: E402
-from .physics.presets import PRESETS, FourBar, SliderCrank, four_bar, paper, preset, with_clearance  # noqa: E402
-from .runs import config, sampling  # noqa: E402
+if TYPE_CHECKING:  # what type checkers and the API docs read; at run time each name loads on first use (_FROM)
+    from .analysis import metrics, outputs
+    from .errors import CorruptFileError
+    from .numerics import solve
+    from .numerics.results import RESULTS, Regime
+    from .numerics.shooting import SteadyOptions
+    from .numerics.solve import DEFAULTS, SOLVERS, Simulation, SimulationError, SolveOptions, simulate, solver_from_name
+    from .numerics.steady import SteadyState, SteadyStateError, steady_state
+    from .physics import ideal, laws, model, params, presets
+    from .physics.joints import JOINT_LAWS, Clearance, Ideal
+    from .physics.laws import CONTACT_LAWS, FRICTION_LAWS
+    from .physics.linkage import (
+        AbstractMechanism,
+        Body,
+        BodyVector,
+        ConstantSpeed,
+        Linkage,
+        Outputs,
+        Point,
+        Pose,
+        Prismatic,
+        Revolute,
+        Site,
+        SpeedProfile,
+        Torque,
+    )  # fmt: skip
+    from .physics.memory import MEMORY_LAWS, FrozenMemory
+    from .physics.parameters import get_parameter, parameter_value, set_parameter, set_parameters
+    from .physics.params import Contact, Friction, Material, ParameterError
+    from .physics.presets import PRESETS, FourBar, SliderCrank, four_bar, paper, preset, with_clearance
+    from .runs import config, sampling
+
+#: the public names, by the module (below ``jaxcrank``) each comes from; each loads on first use
+_FROM = {
+    "analysis": ("metrics", "outputs"),
+    "errors": ("CorruptFileError",),
+    "numerics": ("solve",),
+    "numerics.results": ("RESULTS", "Regime"),
+    "numerics.shooting": ("SteadyOptions",),
+    "numerics.solve": (
+        "DEFAULTS", "SOLVERS", "Simulation", "SimulationError", "SolveOptions", "simulate", "solver_from_name",
+    ),
+    "numerics.steady": ("SteadyState", "SteadyStateError", "steady_state"),
+    "physics": ("ideal", "laws", "model", "params", "presets"),
+    "physics.joints": ("JOINT_LAWS", "Clearance", "Ideal"),
+    "physics.laws": ("CONTACT_LAWS", "FRICTION_LAWS"),
+    "physics.linkage": (
+        "AbstractMechanism", "Body", "BodyVector", "ConstantSpeed", "Linkage", "Outputs", "Point", "Pose",
+        "Prismatic", "Revolute", "Site", "SpeedProfile", "Torque",
+    ),
+    "physics.memory": ("MEMORY_LAWS", "FrozenMemory"),
+    "physics.parameters": ("get_parameter", "parameter_value", "set_parameter", "set_parameters"),
+    "physics.params": ("Contact", "Friction", "Material", "ParameterError"),
+    "physics.presets": ("PRESETS", "FourBar", "SliderCrank", "four_bar", "paper", "preset", "with_clearance"),
+    "runs": ("config", "sampling"),
+}  # fmt: skip
+_ORIGIN = {name: module for module, names in _FROM.items() for name in names}
 
 #: Short names of the modules that ``import jaxcrank`` does not load: each loads on first use.
 _LAZY = {
@@ -89,11 +112,23 @@ _LAZY = {
 
 
 def __getattr__(name: str):
-    if name in _LAZY:
-        import importlib
+    import importlib
 
+    if name in _ORIGIN:
+        module = importlib.import_module(f"{__name__}.{_ORIGIN[name]}")
+        try:
+            value = getattr(module, name)
+        except AttributeError:  # a submodule of a package not imported yet
+            value = importlib.import_module(f"{module.__name__}.{name}")
+        globals()[name] = value
+        return value
+    if name in _LAZY:
         return importlib.import_module(f"{__name__}.{_LAZY[name]}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted({*globals(), *_ORIGIN, *_LAZY})
 
 
 try:

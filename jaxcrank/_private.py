@@ -18,6 +18,10 @@ def backends_started() -> bool:
     JAX has no public query for this: ``jax.extend.backend.backends()`` starts them.
     Private: ``jax._src.xla_bridge.backends_are_initialized``. Falls back to False.
     """
+    import sys
+
+    if "jax" not in sys.modules:  # nothing has imported JAX, so nothing has started a backend
+        return False
     try:
         from jax._src import xla_bridge
     except ImportError:  # pragma: no cover - layout of a future JAX

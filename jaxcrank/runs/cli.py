@@ -339,7 +339,7 @@ def _versions():
 def parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``jaxcrank`` argument parser; only ``command``'s options are added (the others'
     subparsers carry their one-line help), so that naming no command imports no JAX."""
-    top = argparse.ArgumentParser(prog="jaxcrank", description="Differentiable slider-crank with joint clearances.")
+    top = argparse.ArgumentParser(prog="jaxcrank", description="Differentiable planar linkages with joint clearances.")
     top.add_argument("--version", action="version", version=f"jaxcrank {__version__}")
     sub = top.add_subparsers(dest="command", required=True)
     for name, help_ in COMMANDS.items():
@@ -368,6 +368,9 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     command = next((a for a in argv if not a.startswith("-")), None)  # the first word names the command
+    if command in COMMANDS and "jax" not in sys.modules and not {"-h", "--help", "--quiet"} & set(argv):
+        # the first line within the first second: loading JAX, diffrax and optax takes one or two
+        print(f"{command}: starting (loading JAX)", file=sys.stderr, flush=True)
     args = parser(command if command in COMMANDS else None).parse_args(argv)
 
     from ..errors import CorruptFileError
