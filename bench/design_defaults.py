@@ -85,8 +85,8 @@ def main():
         "above_best_known_percent": 100.0 * (value / best - 1.0),
         "target": "within 20 % of the best known held-out value in under 600 s of wall time",
         "met": bool(value <= 1.2 * best and timing["wall_s"] < 600.0),
-        "first_output_note": "first_output_s: the command's first line on standard error, after Python has "
-        "imported JAX (about 2 s of it); the progress bars follow it",
+        "first_output_note": "first_output_s: the command's first line on standard error (printed before "
+        "JAX is imported); the progress bars follow it",
         "heldout": bench_design.HELDOUT,
         "machine": machine(),
     }

@@ -611,7 +611,7 @@ def defaults_run(r) -> list[str]:
         "",
         f"Command: `python bench/design_defaults.py`, which runs `{r['command']}` in a fresh process with an empty "
         f"compilation cache, as a new user's first run, and scores its final design by the held-out truth above. "
-        f"Its first line appeared after {r['first_output_s']:.1f} s (Python importing JAX); then the progress bars. "
+        f"Its first line (`{r['first_line']}`) appeared after {r['first_output_s']:.1f} s; then the progress bars. "
         f"It classified {len(cl)} candidate start{'s' if len(cl) != 1 else ''} "
         f"({', '.join(c['regime'] for c in cl)}) in {sec.get('classifying_starts', float('nan')):.0f} s, compiled "
         f"and evaluated the start in {sec.get('start_optimizer', float('nan')):.0f} s, and ran {r['iterations']} "
