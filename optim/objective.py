@@ -1,5 +1,7 @@
-"""The objectives of design problems, in one place: each kind a final Module of
-[`AbstractObjective`][optim.objective.AbstractObjective].
+"""The objectives of design problems: each kind a final Module of
+[`AbstractObjective`][optim.objective.AbstractObjective] (`Pathwise` here, `Ensemble` in
+[`optim.ensemble`][], `Steady` in [`optim.steady`][]), and the ``[objective]`` tables of
+config files that describe them ([`objective_from_config`][optim.objective.objective_from_config]).
 
 An objective evaluates the RMS metrics of a mechanism (the names its description gives,
 [`jaxcrank.physics.signals.rms_metrics`][], units in the name: the paper's Eq. 19
@@ -82,8 +84,9 @@ class AbstractObjective(eqx.Module):
 
     @abc.abstractmethod
     def describe(self) -> dict:
-        """The settings as a dict of plain values (``kind`` and the fields), for reports
-        and the CLI's resolved configuration."""
+        """The settings as a dict of plain values: ``kind`` and the flat keys of an
+        ``[objective]`` table (the fields, and the options objects' settings, the solver by
+        name), for reports and the CLI's resolved configuration."""
 
 
 def _check_window(t_start, t_end, samples_per_degree):
