@@ -55,12 +55,12 @@ from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
 
 from .objective import objective_config, objective_from_config
-from .optimize import STEADY_LEARNING_RATE, Settings, optimize
+from .optimize import STEADY_LEARNING_RATE, Settings, default_settings, optimize
 from .optimizers import OPTIMIZERS, from_settings
 from .presets import PROBLEMS, paper_reference
 from .problem import AbstractProblem as Problem
 from .starts import multistart, periodic_start
-from .steady import RegimeGuard, Steady
+from .steady import Steady
 
 #: the default ``[optimizer]`` settings with the steady-state objective (those of
 #: [`optim.optimize.default_settings`][], with the regime guard)
@@ -201,9 +201,9 @@ def build(cfg) -> tuple[Problem, Settings]:
     section = dict(cfg.get("optimizer", {}))
     if not isinstance(problem.objective, Steady):
         return problem, settings_from_config(section)
-    # steps kept inside the periodic regime, where the gradient is exact
+    # steps kept inside the periodic regime, where the gradient is exact: the library's guard
     section = section if "method" in section else {**STEADY_OPTIMIZER, **section}
-    return problem, dataclasses.replace(settings_from_config(section), guard=RegimeGuard())
+    return problem, dataclasses.replace(settings_from_config(section), guard=default_settings(problem).guard)
 
 
 def settings_from_config(section: dict) -> Settings:
