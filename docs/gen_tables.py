@@ -311,6 +311,64 @@ def table_friction_width() -> str:
     return t1 + "\nWith Ambrosio's typical ramp end v1 = 2e-4 m/s:\n\n" + t2 + source("friction_width")
 
 
+def _memory_setting(row) -> str:
+    """A row of bench/memory_sensitivity.py's grid in words (the defaults, or one setting in ms)."""
+    return "defaults" if row["parameter"] == "defaults" else f"`{row['parameter']}` = {row['value_s'] * 1e3:g} ms"
+
+
+def table_memory_sensitivity() -> str:
+    """The forgetting memory's tau and t_dwell, one at a time: the paper run's metrics and
+    the steady states of periodic designs (``bench/memory_sensitivity.py``)."""
+    d = results("memory_sensitivity")
+    paper = d["paper_run"]
+    shown = {
+        "rms_transmission_angle_error_deg": "Eq. 19 (deg)",
+        "max_abs_slider_x_deviation_m": "slider x dev. (mm)",
+        "peak_contact_force_B_N": "peak force B (N)",
+        "peak_contact_force_C_N": "peak force C (N)",
+        "peak_driving_moment_N_m": "peak driving moment (N m)",
+        "rms_driving_moment_deviation_N_m": "RMS driving-moment dev. (N m)",
+    }
+
+    def cell(m, key):
+        scale = 1e3 if key.endswith("_deviation_m") else 1.0  # m -> mm
+        text = fmt(m["mean"] * scale, 4)
+        if m["difference_over_standard_error"] is None or m["relative_change"] == 0.0:
+            return text
+        return f"{text} ({100 * m['relative_change']:+.2f} %, {m['difference_over_standard_error']:+.1f} se)"
+
+    rows = [[_memory_setting(r)] + [cell(r["metrics"][k], k) for k in shown] for r in paper["rows"]]
+    t1 = table(["setting"] + list(shown.values()), rows)
+    designs = d["steady"]["designs"]
+    head = ["setting"] + [f"{r['design']}: regime, Eq. 19 (deg), peak force C (N), largest multiplier" for r in designs]
+    rows = []
+    for j, row in enumerate(designs[0]["cells"]):
+        line = [_memory_setting(row)]
+        for r in designs:
+            c = r["cells"][j]
+            if c["regime"] != "periodic":
+                line.append(c["regime"] if c["ok"] else "failed")
+                continue
+            change = c.get("relative_change", {})
+
+            def pct(key, change=change, first=j == 0):
+                return "" if key not in change or first else f" ({100 * change[key]:+.2f} %)"
+
+            line.append(
+                f"P{c['period_revolutions']}, {fmt(c['metrics']['rms_transmission_angle_error_deg'], 5)}"
+                f"{pct('rms_transmission_angle_error_deg')}, {fmt(c['metrics']['peak_contact_force_C_N'], 4)}"
+                f"{pct('peak_contact_force_C_N')}, {c['largest_multiplier_modulus']:.3f}"
+            )
+        rows.append(line)
+    intro = (
+        f"The paper run, {paper['starts']} starts per setting (entries + k x {paper['perturbation_scaled']:g}), "
+        "metrics over 0.1-0.4 s, mean and, in brackets, the change from the defaults' mean and that change in "
+        "standard errors of the difference:\n\n"
+    )
+    mid = "\nThe steady state (`steady_state` with its defaults) at designs of the nine-variable problem:\n\n"
+    return intro + t1 + mid + table(head, rows) + source("memory_sensitivity")
+
+
 def table_paper_assumptions() -> str:
     """Paper reproduction: max |deviation| after the first revolution per unstated assumption."""
     d = results("paper_assumptions")
@@ -698,6 +756,7 @@ TABLES = {
     "stiffness": table_stiffness,
     "friction_width": table_friction_width,
     "paper_assumptions": table_paper_assumptions,
+    "memory_sensitivity": table_memory_sensitivity,
     "sweep": table_sweep,
     "sweep_gpu": table_sweep_gpu,
     "ensemble": table_ensemble,
