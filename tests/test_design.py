@@ -232,6 +232,52 @@ def test_bench_best_so_far_and_checkpoints():
     assert cps[1]["unit_design"] == [0.2] and cps[2]["objective_deg"] == 2.0
 
 
+def test_bench_extended_budgets_checkpoints_and_speedups(tmp_path):
+    """A gradient-free method rerun with a longer budget than its part's is scored at the
+    part's checkpoints, then at the extension multiples up to its own budget; the merge
+    bounds the speedup by the shortest budget of a method that never got within 1 %, and
+    calls it exact only where the first method within 1 % got there before that budget."""
+    import json
+
+    B = _bench()
+    assert B.checkpoint_times(240.0) == [f * 240.0 for f in B.CHECKPOINTS]
+    assert B.checkpoint_times(450.0, base=240.0)[-3:] == [240.0, 360.0, 450.0]
+    assert B.checkpoint_times(1200.0, base=240.0)[-6:] == [360.0, 480.0, 600.0, 720.0, 960.0, 1200.0]
+
+    def method(budget, hit_at, base=240.0):
+        """Held-out 1.0 (the best) from ``hit_at`` on, 2.0 before; None: never."""
+        times = B.checkpoint_times(budget, base=base)
+        cps = [{"t_s": t, "heldout_deg": 1.0 if hit_at is not None and t >= hit_at else 2.0} for t in times]
+        return {"checkpoints": cps, "budget_cpu_s": budget}
+
+    # (ours at, (cma budget, cma hit), (tpe budget, tpe hit)) -> (speedup, lower bound?)
+    cases = {
+        0: ((60.0, (450.0, None), (450.0, None)), (7.5, True)),
+        1: ((60.0, (450.0, 360.0), (450.0, None)), (6.0, False)),
+        2: ((60.0, (450.0, 360.0), (240.0, None)), (4.0, True)),
+        3: ((60.0, (240.0, 180.0), (240.0, 240.0)), (3.0, False)),
+    }
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    for seed, ((ours, cma, tpe), _) in cases.items():
+        part = {
+            "problem": "preset",
+            "stroke_m": 0.24,
+            "crank_speed_rpm": 600.0,
+            "seed": seed,
+            "budget_cpu_s": 240.0,
+            "names": [f"x{j}" for j in range(9)],
+            "start_heldout_deg": 2.0,
+            "methods": {"ours_adam": method(240.0, ours), "cma": method(*cma), "tpe": method(*tpe)},
+        }
+        (parts / f"preset_seed{seed}.json").write_text(json.dumps(part))
+    data = B.merge(parts, tmp_path / "design.json")
+    got = {c["seed"]: (c["speedup"], c["speedup_is_lower_bound"]) for c in data["summary"]["cases"]}
+    for seed, (_, (speedup, bound)) in cases.items():
+        assert got[seed][0] == pytest.approx(speedup) and got[seed][1] is bound
+    assert data["summary"]["cases"][0]["gradient_free_budgets_cpu_s"] == {"cma": 450.0, "tpe": 450.0}
+
+
 @pytest.mark.long
 @pytest.mark.slow
 def test_bench_design_writes_the_schema(tmp_path):
@@ -242,7 +288,8 @@ def test_bench_design_writes_the_schema(tmp_path):
 
     B = _bench()
     parts, out = tmp_path / "parts", tmp_path / "design.json"
-    B.main(["--parts", str(parts), "--problem", "preset", "--seed", "0", "--budget", "5", "--methods", "ours", "cma"])
+    args = ["--problem", "preset", "--seed", "0", "--budget", "5", "--methods", "ours_adam", "cma"]
+    B.main(["--parts", str(parts), *args])
     assert (parts / "preset_seed0.json").exists()
     B.main(["--merge", "--parts", str(parts), "--out", str(out)])
     data = json.loads(out.read_text())
@@ -255,7 +302,7 @@ def test_bench_design_writes_the_schema(tmp_path):
     assert run["seed"] == 0 and run["problem"] == "preset" and run["budget_cpu_s"] == 5.0
     assert {"start_regime", "start_heldout_deg", "compile_s", "machine"} <= set(run)
     assert "speedup_vs_best_gradient_free" in run and "speedup_lower_bound" in run
-    assert set(run["methods"]) == {"ours", "cma"}
+    assert set(run["methods"]) == {"ours_adam", "cma"}
     for m in run["methods"].values():
         assert {"evaluations", "periodic_evaluations", "best_objective", "time_to_1pct_s", "trace"} <= set(m)
         assert len(m["checkpoints"]) == len(data["checkpoint_fractions"])
