@@ -24,9 +24,12 @@ multiplier, up to ``--designs`` of them.
 Per evaluated design and per run from rest at u +- h e_i: Eq. 19, and the distance (max
 over the dynamic entries, ``steady.active``, scaled units) between its section state after
 ``--revolutions`` and the section state of the same design continued ``--continue``
-revolutions from the centre design's settled state (its run from rest; pins carried over,
-:func:`jaxcrank.numerics.steady.carry_state`): the orbit the gradient follows. A run
-farther than ``--left-tol`` scaled units has left that orbit.
+revolutions (rounded up to whole periods) from the centre design's settled state (its run
+from rest; pins carried over, :func:`jaxcrank.numerics.steady.carry_state`): the orbit the
+gradient follows. For a period-k orbit the distance is the smallest over its k section
+points (continued 0 to k - 1 revolutions further; ``phase_revolutions``), since a run from
+rest may settle onto the orbit in another phase. A run farther than ``--left-tol`` scaled
+units has left that orbit.
 
 With ``--random``, the candidates are the Sobol points alone and the first ``--designs``
 periodic ones are evaluated in the order they were drawn, idle memory or not (nothing is
@@ -282,9 +285,12 @@ def evaluate(build, row, h, args):
             u[i] += sign * h
             mech = build(jnp.asarray(u))
             y_rest, v = from_rest(mech, args.revolutions, k)
-            # a whole number of periods, so that a period-k orbit is compared in its own phase
-            y_cont = continued_section(centre, y_centre, mech, k * -(-args.cont // k))
-            diff = np.abs(y_rest - y_cont)[:m]
+            # a whole number of periods, and then each of the k - 1 revolutions after it: a run
+            # from rest may settle onto any of a period-k orbit's k section points (its phase)
+            start = k * -(-args.cont // k)
+            phases = [np.abs(y_rest - continued_section(centre, y_centre, mech, start + j))[:m] for j in range(k)]
+            phase = int(np.argmin([np.max(diff[active]) for diff in phases]))
+            diff = phases[phase]
             d = float(np.max(diff[active]))
             law = law_entries(mech)[0]
             memories = float(np.max(diff[law][active[law]], initial=0.0))
@@ -292,6 +298,7 @@ def evaluate(build, row, h, args):
                 {
                     "value_deg": v,
                     "distance_scaled": d,
+                    "phase_revolutions": phase,
                     "distance_coordinates_rates_scaled": float(np.max(diff[: law[0]])),
                     "distance_memories_scaled": memories,
                     "left_orbit": d > args.left_tol,
