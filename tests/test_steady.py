@@ -439,7 +439,7 @@ def test_exact_gradient_is_the_limit_of_differences_on_its_orbit():
     on the orbit, the step is too long, not the gradient wrong: differences of runs continued
     on the orbit (20 revolutions from the centre's settled state, the leading multiplier
     0.28 leaving 1e-11 of the offset) at h = 1e-4 equal the rod-mass and slider-mass
-    components within 1 % (measured: 0.22 % and 0.21 %; at h = 3e-5, 0.11 % and 0.12 %)."""
+    components within 1 % (measured: 0.22 % and 0.21 %)."""
     u0 = np.asarray(KINKED_NEARBY)
     steady = steady_state(_build(jnp.asarray(u0)))
     assert steady.periodic and steady.period_revolutions == 1
