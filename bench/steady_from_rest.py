@@ -65,6 +65,7 @@ import jax.numpy as jnp
 import numpy as np
 from _common import machine
 from scipy.stats import qmc
+from steady_gradient import _tracked as tracked
 from steady_gradient import designs as gradient_designs
 
 import jaxcrank as jc
@@ -217,19 +218,7 @@ def continued_section(centre_mech, y, mech, revolutions):
 def continued_value(centre_mech, y, mech, revolutions, k):
     """Eq. 19 of ``mech`` over the k revolutions after ``revolutions`` continued from the
     centre's section state ``y`` (pins carried over), sampled as `from_rest`."""
-    y0 = carry_state(centre_mech, jnp.asarray(y), mech).at[-2:].set(0.0)
-    T = float(mech.period)
-    sim = jc.simulate(
-        mech,
-        t1=(revolutions + k) * T,
-        n_samples=(revolutions + k) * 3600 + 1,
-        y0=y0,
-        metrics_start=revolutions * T,
-        save_samples=False,
-        save_ts=jnp.array([revolutions * T]),
-        options=jc.SolveOptions(**TOL),
-    )
-    return float(sim.metrics[KEY])
+    return tracked(mech, revolutions, y0=carry_state(centre_mech, jnp.asarray(y), mech).at[-2:].set(0.0), k=k)
 
 
 def continued_differences(build, res, args):
