@@ -443,7 +443,7 @@ def merge(parts_dir: Path, out: Path) -> dict:
                     "default": DEFAULT,
                     **{f"{k}_time_to_1pct_s": p["methods"].get(k, {}).get("time_to_1pct_s") for k in OURS},
                     "best_gradient_free_time_to_1pct_s": min(reached) if reached else None,
-                    "gradient_free_budgets_cpu_s": {k: method_budget(p, k) for k in GRADIENT_FREE if k in p["methods"]},
+                    "gradient_free_budgets_cpu_s": {k: b for k, (_, b) in zip(ran, free)},
                     "speedup": speedup,
                     "speedup_is_lower_bound": p["speedup_lower_bound"] is not None,
                 }

@@ -21,6 +21,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_design import GRADIENT_FREE, method_budget  # noqa: E402 - the head-to-head's own names
 
 #: the head-to-head's target: ours within 1 % of the best held-out value this many times sooner
 TARGET_SPEEDUP = 5.0
@@ -50,7 +52,6 @@ LABEL = {
     "cma": "CMA-ES",
     "tpe": "TPE",
 }
-GRADIENT_FREE = ("cma", "tpe")
 
 
 def _s(x, fmt="{:.1f}"):
@@ -173,11 +174,6 @@ def _order(method: str) -> int:
     return list(LABEL).index(method) if method in LABEL else len(LABEL)
 
 
-def _budget(run, method: str) -> float:
-    """The CPU budget (s) ``method`` ran with in ``run``: its own where it was rerun longer, else the part's."""
-    return run["methods"][method].get("budget_cpu_s", run["budget_cpu_s"])
-
-
 def run_table(run) -> list[str]:
     """One part (problem and seed): each method's budget, evaluations, objective, held-out value, time to 1 %."""
     lines = [
@@ -187,7 +183,7 @@ def run_table(run) -> list[str]:
     ]
     for k, m in sorted(run["methods"].items(), key=lambda km: _order(km[0])):
         lines.append(
-            f"| {_label(k)} | {_budget(run, k):g} | {m['evaluations']} ({m['periodic_evaluations']}) | "
+            f"| {_label(k)} | {method_budget(run, k):g} | {m['evaluations']} ({m['periodic_evaluations']}) | "
             f"{_deg(m['best_objective'])} | {_final_heldout(m)} | {_t(m.get('time_to_1pct_s'))} |"
         )
     return lines
@@ -264,7 +260,7 @@ def _budget_why(run, case) -> str | None:
     if not case.get("speedup_is_lower_bound"):
         return None
     ours = run["methods"][case["default"]]
-    budget = min(_budget(run, k) for k in run["methods"] if k in GRADIENT_FREE)
+    budget = min(method_budget(run, k) for k in run["methods"] if k in GRADIENT_FREE)
     best = min(_final(m)["heldout_deg"] for k, m in run["methods"].items() if k in GRADIENT_FREE)
     target = case["ours_time_to_1pct_s"]
     return (
@@ -416,11 +412,11 @@ def _methods(d, methods) -> str:
 def _extended(d) -> str:
     """The gradient-free runs rerun with a longer budget than their part's, in words (empty when none)."""
     longer = [
-        (p["name"], r["seed"], _budget(r, k))
+        (p["name"], r["seed"], method_budget(r, k))
         for p in d["problems"]
         for r in p["runs"]
         for k in GRADIENT_FREE
-        if k in r["methods"] and _budget(r, k) > r["budget_cpu_s"]
+        if k in r["methods"] and method_budget(r, k) > r["budget_cpu_s"]
     ]
     if not longer:
         return ""
