@@ -14,8 +14,8 @@ steady-state objective (:class:`optim.steady.Steady` at `STEADY`: Eq. 19 and the
 over one period of the periodic orbit; outside the periodic regime the long-run statistical
 value) over the scaled box [0, 1]^9 from the problem's start design, with the same CPU budget:
 
-- ``ours_adam``: the library's way in and projected Adam (`LEARNING_RATE`). The start's regime
-  is classified and, if it is not periodic, scrambled Sobol points until one is
+- ``ours_adam``: the library's way in and projected Adam (`LEARNING_RATE`). The start and then
+  scrambled Sobol points are classified until one is periodic and the lowest value so far
   (:func:`optim.starts.periodic_start`, at most `CLASSIFY`); from it, Adam on the exact
   steady-state gradient with the regime guard (:class:`optim.steady.RegimeGuard`), the
   classification's orbit carried in.

@@ -397,8 +397,8 @@ def adam_comparison(d) -> list[str]:
 def _methods(d, methods) -> str:
     """The methods of the head-to-head in words."""
     words = {
-        "ours_adam": "ours, the library's way in and its default optimiser: the start's regime is classified and, "
-        f"if it is not periodic, scrambled Sobol points until one is (at most {d['classify_at_most']}: "
+        "ours_adam": "ours, the library's way in and its default optimiser: the start and then scrambled Sobol "
+        f"points are classified until one is periodic with the lowest value so far (at most {d['classify_at_most']}: "
         f"`optim.starts.periodic_start`), then projected Adam (step {d['learning_rate_adam']:g} in scaled units) "
         "on the exact steady-state gradient with the regime guard, the classification's orbit carried in",
         "ours_lbfgs": "ours with L-BFGS: the same with projected L-BFGS",

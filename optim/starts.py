@@ -1,13 +1,15 @@
 """Where an optimisation starts: the problem's start and scrambled Sobol points of the box
 ([`start_points`][optim.starts.start_points]), the best of local runs from several of them
 ([`multistart`][optim.starts.multistart]), and, for the steady-state objective, the first
-periodic design among them ([`periodic_start`][optim.starts.periodic_start]).
+periodic design among them that is no worse than any before it
+([`periodic_start`][optim.starts.periodic_start]).
 
 The steady-state gradient is exact on the periodic orbit and exactly zero outside the periodic
 regime (without a trend estimate), so a gradient run from a design that is not periodic has
 nowhere to go. [`periodic_start`][optim.starts.periodic_start] classifies candidate starts by
-their steady state, value only, until one is periodic, and hands that steady state to the
-optimiser (its evaluator warm-starts from it): the start is solved once.
+their steady state, value only, until one is periodic and has the lowest value classified so
+far, and hands that steady state to the optimiser (its evaluator warm-starts from it): the
+start is solved once.
 """
 
 from __future__ import annotations
@@ -176,10 +178,14 @@ def periodic_start(
     evaluator: SteadyEvaluator | None = None,
     progress: bool = True,
 ) -> StartSearch:
-    """The first periodic design among ``count`` candidate starts of a steady-state problem
+    """A periodic start among ``count`` candidate starts of a steady-state problem
     ([`start_points`][optim.starts.start_points]: the problem's start, then scrambled Sobol
-    points), each classified by its steady state (value only), stopping at the first
-    periodic one.
+    points), each classified by its steady state (value only, the long-run statistical value
+    where it is not periodic), in order. The search stops at the first periodic candidate whose
+    value is the lowest classified so far; a periodic candidate above a value already seen (a
+    design that is not periodic but better, or a better periodic one) is passed over, since a
+    descent from it starts in a poorer basin. Where no candidate stops the search, the lowest
+    periodic one is chosen.
 
     Args:
         problem: a problem whose objective is [`optim.steady.Steady`][].
@@ -189,36 +195,41 @@ def periodic_start(
         progress: show a progress bar over the candidates.
 
     Returns:
-        a [`StartSearch`][optim.starts.StartSearch]; where no candidate is periodic, the
-        problem's own start is kept and ``periodic`` is False (an optimiser run from it stops
-        at once, saying why).
+        a [`StartSearch`][optim.starts.StartSearch] whose evaluator warm-starts from the chosen
+        candidate's orbit; where no candidate is periodic, the problem's own start is kept and
+        ``periodic`` is False (an optimiser run from it stops at once, saying why).
 
     Raises:
         ParameterError: ``count < 1`` or an objective other than the steady state.
     """
     evaluator = SteadyEvaluator(problem) if evaluator is None else evaluator
     points = start_points(problem, count, seed)
-    classified = []
+    classified, lowest = [], np.inf
     bar = tqdm(points, desc="classifying starts", unit="design", disable=not progress)
     for u in bar:
         tic = time.perf_counter()
         value, info = evaluator.value(np.asarray(problem.from_unit(jnp.asarray(u))))
         regime = info["regime"] if info["ok"] else FAILED
+        finite = bool(np.isfinite(value))
         classified.append(
             {
                 "unit_design": np.asarray(u).tolist(),
-                "value_deg": float(value) if np.isfinite(value) else None,
+                "value_deg": float(value) if finite else None,
                 "regime": regime,
                 "seconds": time.perf_counter() - tic,
             }
         )
         bar.set_postfix(regime=regime)
-        if regime == PERIODIC:
+        if regime == PERIODIC and value <= lowest:
             break
+        lowest = min(lowest, value) if finite else lowest
     bar.close()
-    periodic = classified[-1]["regime"] == PERIODIC
-    chosen = len(classified) - 1 if periodic else 0
+    candidates = [k for k, c in enumerate(classified) if c["regime"] == PERIODIC]
+    periodic = bool(candidates)
+    chosen = min(candidates, key=lambda k: classified[k]["value_deg"]) if periodic else 0
     if chosen:
         x0 = tuple(float(v) for v in np.asarray(problem.from_unit(jnp.asarray(classified[chosen]["unit_design"]))))
         problem = dataclasses.replace(problem, start=x0)
+    if periodic and chosen != len(classified) - 1:  # another candidate's orbit is the evaluator's last
+        evaluator.warm_from(np.asarray(problem.from_unit(problem.start_unit())))
     return StartSearch(problem, evaluator, classified, chosen, periodic)

@@ -236,6 +236,13 @@ class SteadyEvaluator:
             rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in names}
         return float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x))), info
 
+    def warm_from(self, x) -> None:
+        """Make the steady state at SI design ``x`` the next warm start, where it is periodic
+        (solved again only when it is no longer among the cached ones)."""
+        steady = self.steady_at(x)
+        if steady.periodic:
+            self.last = steady
+
     def regime_at(self, x) -> Regime:
         """The [`Regime`][jaxcrank.numerics.results.Regime] at SI design ``x`` (``FAILED`` when the solve failed)."""
         steady = self.steady_at(x)

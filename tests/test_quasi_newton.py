@@ -199,6 +199,10 @@ class _Evaluator:
         self.evaluated.pop()
         return value, {**report, "ok": True}
 
+    def warm_from(self, x):
+        """Records the design the next solve would warm-start from (nothing is solved here)."""
+        self.warm = self.unit(x)
+
 
 def _patch(monkeypatch, **kwargs):
     made = []
