@@ -227,9 +227,9 @@ def periodic_start(
     candidates = [k for k, c in enumerate(classified) if c["regime"] == PERIODIC]
     periodic = bool(candidates)
     chosen = min(candidates, key=lambda k: classified[k]["value_deg"]) if periodic else 0
-    if chosen:
-        x0 = tuple(float(v) for v in np.asarray(problem.from_unit(jnp.asarray(classified[chosen]["unit_design"]))))
-        problem = dataclasses.replace(problem, start=x0)
+    x0 = np.asarray(problem.from_unit(jnp.asarray(classified[chosen]["unit_design"])))  # as classified
     if periodic and chosen != len(classified) - 1:  # another candidate's orbit is the evaluator's last
-        evaluator.warm_from(np.asarray(problem.from_unit(problem.start_unit())))
+        evaluator.warm_from(x0)
+    if chosen:
+        problem = dataclasses.replace(problem, start=tuple(float(v) for v in x0))
     return StartSearch(problem, evaluator, classified, chosen, periodic)
