@@ -16,9 +16,9 @@ value) over the scaled box [0, 1]^9 from the problem's start design, with the sa
 
 - ``ours_adam``: the library's way in and projected Adam (`LEARNING_RATE`). The start and then
   scrambled Sobol points are classified until one is periodic and the lowest value so far
-  (:func:`optim.starts.periodic_start`, at most `CLASSIFY`); from it, Adam on the exact
-  steady-state gradient with the regime guard (:class:`optim.steady.RegimeGuard`), the
-  classification's orbit carried in.
+  (:func:`optim.starts.periodic_start`, at most `CLASSIFY`; else the lowest periodic one); from
+  it, Adam on the exact steady-state gradient with the regime guard
+  (:class:`optim.steady.RegimeGuard`), the classification's orbit carried in.
 - ``ours_lbfgs``: the same with projected L-BFGS (:class:`optim.optimizers.ProjectedLBFGS`).
   The better of the two by time to 1 % is the library's default (`DEFAULT`), and the target
   is measured on it.

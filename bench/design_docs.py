@@ -31,9 +31,10 @@ WHY: dict[tuple[str, int], str] = {
     ("short_fast", 1): (
         "Why: CMA-ES with seed 1, rerun with 1200 CPU s, reached the band at 600 s (0.07673 deg) and went on to "
         "the best design of any method (0.07631 by 1200 s); with seed 0 it ended 1.4 % above that value, outside "
-        "the band. Ours is the same run in both seeds (the problem's start is periodic, so the Sobol points are "
-        "never drawn) and needed 240 s: its first four gradient evaluations took 74 s, 43 s of it compiling the "
-        "gradient programs, and the iterations after them about 2 s each. A 5x lead here needs ours within 120 s."
+        "the band. Ours takes the same iterates in both seeds (the problem's start is periodic, so the Sobol "
+        "points are never drawn; only the CPU times differ) and needed 240 s in both: its first four gradient "
+        "evaluations took 74 s, 43 s of it compiling the gradient programs, and the iterations after them about 2 s "
+        "each. A 5x lead here needs ours within 120 s."
     ),
     ("long_fast", 1): (
         "Why: from its start (the first Sobol point, periodic at 0.2167 deg) Adam converges in another basin than "
@@ -397,8 +398,9 @@ def _methods(d, methods) -> str:
     """The methods of the head-to-head in words."""
     words = {
         "ours_adam": "ours, the library's way in and its default optimiser: the start and then scrambled Sobol "
-        f"points are classified until one is periodic with the lowest value so far (at most {d['classify_at_most']}: "
-        f"`optim.starts.periodic_start`), then projected Adam (step {d['learning_rate_adam']:g} in scaled units) "
+        f"points are classified until one is periodic with the lowest value so far (at most {d['classify_at_most']}, "
+        "else the lowest periodic one: `optim.starts.periodic_start`), then projected Adam "
+        f"(step {d['learning_rate_adam']:g} in scaled units) "
         "on the exact steady-state gradient with the regime guard, the classification's orbit carried in",
         "ours_lbfgs": "ours with L-BFGS: the same with projected L-BFGS",
         "cma": "CMA-ES (`cma`), on the objective's value only",

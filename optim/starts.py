@@ -1,15 +1,14 @@
 """Where an optimisation starts: the problem's start and scrambled Sobol points of the box
 ([`start_points`][optim.starts.start_points]), the best of local runs from several of them
-([`multistart`][optim.starts.multistart]), and, for the steady-state objective, the first
-periodic design among them that is no worse than any before it
-([`periodic_start`][optim.starts.periodic_start]).
+([`multistart`][optim.starts.multistart]), and, for the steady-state objective, a periodic
+design among them ([`periodic_start`][optim.starts.periodic_start]).
 
 The steady-state gradient is exact on the periodic orbit and exactly zero outside the periodic
 regime (without a trend estimate), so a gradient run from a design that is not periodic has
 nowhere to go. [`periodic_start`][optim.starts.periodic_start] classifies candidate starts by
 their steady state, value only, until one is periodic and has the lowest value classified so
-far, and hands that steady state to the optimiser (its evaluator warm-starts from it): the
-start is solved once.
+far (else it takes the lowest periodic one), and hands that steady state to the optimiser (its
+evaluator warm-starts from it): the start is solved once.
 """
 
 from __future__ import annotations
@@ -180,12 +179,13 @@ def periodic_start(
 ) -> StartSearch:
     """A periodic start among ``count`` candidate starts of a steady-state problem
     ([`start_points`][optim.starts.start_points]: the problem's start, then scrambled Sobol
-    points), each classified by its steady state (value only, the long-run statistical value
-    where it is not periodic), in order. The search stops at the first periodic candidate whose
-    value is the lowest classified so far; a periodic candidate above a value already seen (a
-    design that is not periodic but better, or a better periodic one) is passed over, since a
-    descent from it starts in a poorer basin. Where no candidate stops the search, the lowest
-    periodic one is chosen.
+    points), each classified by its steady state (value only: over the orbit where it is
+    periodic, else the long-run statistical estimate), in order. The search stops at the first
+    periodic candidate whose value is the lowest classified so far. A periodic candidate above a
+    value already seen (a design that is not periodic but better, or a better periodic one) is
+    passed over: a heuristic, since a descent from it is likely to start in a poorer basin.
+    Where no candidate stops the search, the lowest periodic one is chosen. A candidate whose
+    value is not finite is never chosen and sets no bar.
 
     Args:
         problem: a problem whose objective is [`optim.steady.Steady`][].
@@ -196,7 +196,8 @@ def periodic_start(
 
     Returns:
         a [`StartSearch`][optim.starts.StartSearch] whose evaluator warm-starts from the chosen
-        candidate's orbit; where no candidate is periodic, the problem's own start is kept and
+        candidate's orbit (kept as it was classified: it is not solved again); where no
+        candidate is periodic, the problem's own start is kept and
         ``periodic`` is False (an optimiser run from it stops at once, saying why).
 
     Raises:
@@ -204,7 +205,7 @@ def periodic_start(
     """
     evaluator = SteadyEvaluator(problem) if evaluator is None else evaluator
     points = start_points(problem, count, seed)
-    classified, lowest = [], np.inf
+    classified, lowest, best = [], np.inf, np.inf  # lowest value of any candidate, of a periodic one
     bar = tqdm(points, desc="classifying starts", unit="design", disable=not progress)
     for u in bar:
         tic = time.perf_counter()
@@ -220,16 +221,21 @@ def periodic_start(
             }
         )
         bar.set_postfix(regime=regime)
-        if regime == PERIODIC and value <= lowest:
-            break
-        lowest = min(lowest, value) if finite else lowest
+        if not finite:
+            continue
+        if regime == PERIODIC and value < best:  # kept by the evaluator: later candidates do not evict it
+            best = value
+            evaluator.warm_from(np.asarray(problem.from_unit(jnp.asarray(u))))
+            if value <= lowest:
+                break
+        lowest = min(lowest, value)
     bar.close()
-    candidates = [k for k, c in enumerate(classified) if c["regime"] == PERIODIC]
+    candidates = [k for k, c in enumerate(classified) if c["regime"] == PERIODIC and c["value_deg"] is not None]
     periodic = bool(candidates)
     chosen = min(candidates, key=lambda k: classified[k]["value_deg"]) if periodic else 0
-    x0 = np.asarray(problem.from_unit(jnp.asarray(classified[chosen]["unit_design"])))  # as classified
-    if periodic and chosen != len(classified) - 1:  # another candidate's orbit is the evaluator's last
+    if periodic:  # the kept orbit is the chosen one's: the next warm start again
+        x0 = np.asarray(problem.from_unit(jnp.asarray(classified[chosen]["unit_design"])))  # as classified
         evaluator.warm_from(x0)
-    if chosen:
-        problem = dataclasses.replace(problem, start=tuple(float(v) for v in x0))
+        if chosen:
+            problem = dataclasses.replace(problem, start=tuple(float(v) for v in x0))
     return StartSearch(problem, evaluator, classified, chosen, periodic)

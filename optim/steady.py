@@ -198,6 +198,7 @@ class SteadyEvaluator:
         self.objective = self.problem.objective
         self.last = None  # the last periodic steady state: the next warm start
         self._steady = {}
+        self._kept = None  # (design key, steady state) kept by warm_from beyond the cache
         self._trend = None
         self.last_report = {}  # report() of the last evaluated design
         self.compile_seconds = 0.0  # wall time this evaluator spent compiling gradient programs, s
@@ -208,6 +209,8 @@ class SteadyEvaluator:
         without a full settle (its shooting from the carried-over state met an unstable
         orbit) is classified again from rest: the regime is the motion's from rest."""
         key = tuple(float(v) for v in np.asarray(x, dtype=float))
+        if self._kept is not None and key == self._kept[0]:
+            return self._kept[1]
         if key not in self._steady:
             mech = self.problem.mechanism(jnp.asarray(key))
             steady = self.objective.solve(mech, warm_start=self.last)
@@ -237,11 +240,14 @@ class SteadyEvaluator:
         return float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x))), info
 
     def warm_from(self, x) -> None:
-        """Make the steady state at SI design ``x`` the next warm start, where it is periodic
-        (solved again only when it is no longer among the cached ones)."""
+        """Make the steady state at SI design ``x`` the next warm start, where it is periodic, and
+        keep it beyond the cache of the last few designs until another design is kept: a later
+        ``warm_from(x)`` or evaluation at ``x`` finds it without a solve. ``x`` is solved
+        (warm-started from the last periodic steady state) only when it is neither kept nor cached."""
         steady = self.steady_at(x)
         if steady.periodic:
             self.last = steady
+            self._kept = (tuple(float(v) for v in np.asarray(x, dtype=float)), steady)
 
     def regime_at(self, x) -> Regime:
         """The [`Regime`][jaxcrank.numerics.results.Regime] at SI design ``x`` (``FAILED`` when the solve failed)."""

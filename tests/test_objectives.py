@@ -281,6 +281,34 @@ def test_a_warm_start_that_meets_no_attracting_orbit_is_classified_again_from_re
     assert not ev.steady_at(np.array([0.122, 0.40])).periodic
 
 
+def test_a_kept_steady_state_outlives_the_cache_and_becomes_the_warm_start_again(monkeypatch):
+    """``warm_from`` keeps a periodic design's steady state beyond the cache of the last few
+    designs: after five other designs (more than the cache holds) it is found without a solve and
+    is the next warm start again; a design that is not periodic is neither kept nor a warm start."""
+    from types import SimpleNamespace
+
+    from optim.steady import Steady, SteadyEvaluator
+
+    solved = []
+
+    def solve(self, mech, warm_start=None):
+        solved.append(float(mech.crank_length))
+        return SimpleNamespace(periodic=float(mech.crank_length) < 0.125, revolutions={"settle": 20}, ok=True)
+
+    monkeypatch.setattr(Steady, "solve", solve)
+    ev = SteadyEvaluator(paper_problem(Steady()))
+    kept = np.array([0.12, 0.40])
+    ev.warm_from(kept)
+    steady = ev.steady_at(kept)
+    for crank in (0.121, 0.122, 0.123, 0.124, 0.13):
+        ev.steady_at(np.array([crank, 0.40]))
+    assert ev.last is not steady and len(solved) == 6
+    ev.warm_from(kept)
+    assert ev.last is steady and len(solved) == 6  # found, not solved again
+    ev.warm_from(np.array([0.13, 0.40]))  # cached and not periodic: nothing changes
+    assert ev.last is steady and ev.steady_at(kept) is steady and len(solved) == 6
+
+
 @pytest.mark.slow  # compiles the steady-state solve and the gradient program (about 3 min on 2 cores)
 def test_steady_objective_gradient_matches_central_differences_of_its_values():
     """At the periodic CMA-ES design of the nine-variable problem: the steady-state

@@ -174,7 +174,7 @@ class _Evaluator:
 
     def __init__(self, problem, periodic=lambda u: u[2] < 0.6):
         self.problem, self.periodic, self.evaluated, self.asked = problem, periodic, [], []
-        self.last_report, self.compile_seconds, self.classified = {}, 0.0, []
+        self.last_report, self.compile_seconds, self.classified, self.warmed = {}, 0.0, [], []
 
     def unit(self, x):
         return np.asarray(self.problem.to_unit(jnp.asarray(x)))
@@ -200,8 +200,8 @@ class _Evaluator:
         return value, {**report, "ok": True}
 
     def warm_from(self, x):
-        """Records the design the next solve would warm-start from (nothing is solved here)."""
-        self.warm = self.unit(x)
+        """Records each design a solve would be told to warm-start from (nothing is solved here)."""
+        self.warmed.append(self.unit(x))
 
 
 def _patch(monkeypatch, **kwargs):

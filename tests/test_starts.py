@@ -4,6 +4,7 @@ evaluator to the optimiser.
 The steady-state evaluator is the stand-in of test_quasi_newton: no mechanism is solved."""
 
 import dataclasses
+import math
 
 import jax.numpy as jnp
 import numpy as np
@@ -47,7 +48,8 @@ def test_a_periodic_candidate_above_a_value_already_seen_is_passed_over():
     """From u_2 = 0.9 with seed 1 the stand-in's candidates are (value, periodic): (6.70, no),
     (3.62, no), (6.32, yes), (3.28, no), (4.45, yes), (2.82, yes), ...: the periodic candidates 2
     and 4 lie above a value already seen, and the search stops at 5, the first periodic one that
-    is the lowest so far. The evaluator's last orbit is then the chosen one's: nothing is re-solved."""
+    is the lowest so far. Each periodic candidate lower than every periodic one before it is kept
+    by the evaluator as it is classified (2, 4, 5), and the chosen one is the warm start at the end."""
     prob = _start(steady_problem(), [0.1, 0.1, 0.9])
     ev = _Evaluator(prob)
     found = periodic_start(prob, count=8, seed=1, evaluator=ev, progress=False)
@@ -55,21 +57,35 @@ def test_a_periodic_candidate_above_a_value_already_seen_is_passed_over():
     assert found.periodic and found.chosen == 5 == len(found.classified) - 1
     assert [c["regime"] == PERIODIC for c in found.classified] == [False, False, True, False, True, True]
     assert values[5] < min(values[:5]) and values[2] > values[1] and values[4] > values[3]
-    np.testing.assert_allclose(np.asarray(found.problem.start_unit()), start_points(prob, 8, seed=1)[5], atol=1e-12)
-    assert not hasattr(ev, "warm")
+    candidates = start_points(prob, 8, seed=1)
+    np.testing.assert_allclose(np.asarray(found.problem.start_unit()), candidates[5], atol=1e-12)
+    np.testing.assert_allclose(np.asarray(ev.warmed), candidates[[2, 4, 5, 5]], atol=1e-9)
 
 
 def test_with_no_candidate_stopping_the_search_the_lowest_periodic_one_is_chosen_and_warm_starts():
     """Only candidate 2 (6.32) is periodic among 5 and lies above the 3.62 of candidate 1: every
-    candidate is classified, 2 is chosen, and the evaluator is told to warm-start from it (its
-    last orbit was not the chosen one's)."""
+    candidate is classified, 2 is chosen, and the evaluator, which kept its orbit when it was
+    classified, is told to warm-start from it at the end."""
     prob = _start(steady_problem(), [0.1, 0.1, 0.9])
     chosen = start_points(prob, 5, seed=1)[2]
     ev = _Evaluator(prob, periodic=lambda u: bool(np.allclose(u, chosen, atol=1e-9)))
     found = periodic_start(prob, count=5, seed=1, evaluator=ev, progress=False)
     assert found.periodic and found.chosen == 2 and len(found.classified) == 5
     np.testing.assert_allclose(np.asarray(found.problem.start_unit()), chosen, atol=1e-12)
-    np.testing.assert_allclose(ev.warm, chosen, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(ev.warmed), [chosen, chosen], atol=1e-9)
+
+
+def test_a_periodic_candidate_without_a_finite_value_is_never_chosen():
+    """A periodic candidate whose value is not finite neither stops the search nor sets a bar:
+    the next periodic one is chosen."""
+    prob = _start(steady_problem(), [0.1, 0.1, 0.9])
+    first = start_points(prob, 8, seed=3)[1]  # the first periodic candidate of seed 3 (3.22)
+    ev = _Evaluator(prob)
+    value = ev.value
+    ev.value = lambda x: (math.nan, value(x)[1]) if np.allclose(ev.unit(x), first, atol=1e-9) else value(x)
+    found = periodic_start(prob, count=8, seed=3, evaluator=ev, progress=False)
+    assert found.periodic and found.chosen == 3 == len(found.classified) - 1
+    assert found.classified[1]["regime"] == PERIODIC and found.classified[1]["value_deg"] is None
 
 
 def test_no_periodic_candidate_keeps_the_start_and_the_run_from_it_is_not_converged(monkeypatch):
