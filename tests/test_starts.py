@@ -32,7 +32,8 @@ def test_a_periodic_start_is_kept_after_one_classification():
 
 def test_a_not_periodic_start_is_replaced_by_the_first_periodic_candidate():
     """From u_2 = 0.9 (not periodic) the Sobol candidates are classified in order until the
-    first periodic one, which becomes the start; nothing after it is classified."""
+    first periodic one, here also the lowest value so far, which becomes the start; nothing
+    after it is classified."""
     prob = _start(steady_problem(), [0.1, 0.1, 0.9])
     ev = _Evaluator(prob)
     found = periodic_start(prob, count=8, seed=3, evaluator=ev, progress=False)
