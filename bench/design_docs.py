@@ -411,41 +411,36 @@ def _methods(d, methods) -> str:
 
 
 def _extended(d) -> str:
-    """The gradient-free runs rerun with a longer budget than their part's, in words (empty when none)."""
+    """The methods rerun with a longer budget than their part's, in words (empty when none): the
+    gradient-free ones where ours' speedup was bounded by the budget, ours where it had not got within 1 %."""
     longer = [
-        (p["name"], r["seed"], method_budget(r, k))
+        (p["name"], r["seed"], k, method_budget(r, k))
         for p in d["problems"]
         for r in p["runs"]
-        for k in GRADIENT_FREE
-        if k in r["methods"] and method_budget(r, k) > r["budget_cpu_s"]
+        for k in sorted(r["methods"], key=_order)
+        if method_budget(r, k) > r["budget_cpu_s"]
     ]
-    if not longer:
-        return ""
     ours = {k: c["ours_time_to_1pct_s"] for k, c in _cases(d).items()}
 
     def one(name, seed, b):
         t = ours.get((name, seed))
         return f"{name} seed {seed}: {b:g} s" + (f", {b / t:.1f}x ours' time to 1 %" if t else "")
 
-    listed = "; ".join(one(*c) for c in _distinct(longer))
-    ours_longer = [
-        f"{_label(k)} on {p['name']} seed {r['seed']}: {method_budget(r, k):g} s"
-        for p in d["problems"]
-        for r in p["runs"]
-        for k in sorted(r["methods"], key=_order)
-        if k not in GRADIENT_FREE and method_budget(r, k) > r["budget_cpu_s"]
-    ]
-    return (
+    free = _distinct((name, seed, b) for name, seed, k, b in longer if k in GRADIENT_FREE)
+    mine = [f"{_label(k)} on {name} seed {seed}: {b:g} s" for name, seed, k, b in longer if k not in GRADIENT_FREE]
+    text = (
         " Where ours' speedup was bounded only by the part's budget, the gradient-free methods were rerun from "
-        f"scratch with a longer one ({listed}; `--update --methods cma tpe --budget B`), in the same way, and "
-        "scored also at 1.5, 2, 2.5, 3, 4 and 5 times the part's budget, up to their own."
-        + (
-            f" Ours was rerun with a longer budget where it had not got within 1 % ({'; '.join(ours_longer)}), "
-            "to see where it stops."
-            if ours_longer
-            else ""
-        )
+        f"scratch with a longer one ({'; '.join(one(*c) for c in free)}; `--update --methods cma tpe --budget B`), "
+        "in the same way, and scored also at 1.5, 2, 2.5, 3, 4 and 5 times the part's budget, up to their own."
+        if free
+        else ""
     )
+    if mine:
+        text += (
+            f" Ours was rerun with a longer budget where it had not got within 1 % ({'; '.join(mine)}), to see "
+            "where it stops."
+        )
+    return text
 
 
 def head_to_head(d) -> list[str]:

@@ -205,11 +205,12 @@ def periodic_start(
     """
     evaluator = SteadyEvaluator(problem) if evaluator is None else evaluator
     points = start_points(problem, count, seed)
-    classified, lowest, best = [], np.inf, np.inf  # lowest value of any candidate, of a periodic one
+    classified, lowest, best, chosen = [], np.inf, np.inf, None  # lowest value of any candidate, of a periodic one
     bar = tqdm(points, desc="classifying starts", unit="design", disable=not progress)
-    for u in bar:
+    for k, u in enumerate(bar):
         tic = time.perf_counter()
-        value, info = evaluator.value(np.asarray(problem.from_unit(jnp.asarray(u))))
+        x = np.asarray(problem.from_unit(jnp.asarray(u)))
+        value, info = evaluator.value(x)
         regime = info["regime"] if info["ok"] else FAILED
         finite = bool(np.isfinite(value))
         classified.append(
@@ -224,18 +225,15 @@ def periodic_start(
         if not finite:
             continue
         if regime == PERIODIC and value < best:  # kept by the evaluator: later candidates do not evict it
-            best = value
-            evaluator.warm_from(np.asarray(problem.from_unit(jnp.asarray(u))))
+            best, chosen, x_best = value, k, x
+            evaluator.warm_from(x)
             if value <= lowest:
                 break
         lowest = min(lowest, value)
     bar.close()
-    candidates = [k for k, c in enumerate(classified) if c["regime"] == PERIODIC and c["value_deg"] is not None]
-    periodic = bool(candidates)
-    chosen = min(candidates, key=lambda k: classified[k]["value_deg"]) if periodic else 0
-    if periodic:  # the kept orbit is the chosen one's: the next warm start again
-        x0 = np.asarray(problem.from_unit(jnp.asarray(classified[chosen]["unit_design"])))  # as classified
-        evaluator.warm_from(x0)
+    periodic = chosen is not None
+    if periodic:  # a later periodic candidate's orbit may be the last: the kept one is the warm start again
+        evaluator.warm_from(x_best)
         if chosen:
-            problem = dataclasses.replace(problem, start=tuple(float(v) for v in x0))
-    return StartSearch(problem, evaluator, classified, chosen, periodic)
+            problem = dataclasses.replace(problem, start=tuple(float(v) for v in x_best))
+    return StartSearch(problem, evaluator, classified, chosen if periodic else 0, periodic)

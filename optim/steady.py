@@ -175,6 +175,11 @@ def forget_programs() -> None:
     _PROGRAMS.clear()
 
 
+def _key(x) -> tuple[float, ...]:
+    """A design as the key of the evaluator's cached steady states."""
+    return tuple(float(v) for v in np.asarray(x, dtype=float))
+
+
 class SteadyEvaluator:
     """Value and exact gradient of a problem measured by a [`Steady`][optim.steady.Steady] objective, at
     concrete designs, each steady state warm-started from the last periodic one. A design
@@ -208,7 +213,7 @@ class SteadyEvaluator:
         from the last periodic one. A warm-started solve that finds no attracting orbit
         without a full settle (its shooting from the carried-over state met an unstable
         orbit) is classified again from rest: the regime is the motion's from rest."""
-        key = tuple(float(v) for v in np.asarray(x, dtype=float))
+        key = _key(x)
         if self._kept is not None and key == self._kept[0]:
             return self._kept[1]
         if key not in self._steady:
@@ -247,7 +252,7 @@ class SteadyEvaluator:
         steady = self.steady_at(x)
         if steady.periodic:
             self.last = steady
-            self._kept = (tuple(float(v) for v in np.asarray(x, dtype=float)), steady)
+            self._kept = (_key(x), steady)
 
     def regime_at(self, x) -> Regime:
         """The [`Regime`][jaxcrank.numerics.results.Regime] at SI design ``x`` (``FAILED`` when the solve failed)."""
