@@ -3,9 +3,10 @@
 The public API is what ``__all__`` lists. The modules live in four layers, each
 importing only from the ones before it:
 
-- ``jaxcrank.physics``: the description (``linkage``, ``presets``, ``joints``, ``laws``,
-  ``memory``, ``params``, ``parameters``), its structure (``topology``, ``closure``) and
-  the model (``state``, ``kinematics``, ``dynamics``, ``frame``, ``signals``, re-exported by
+- ``jaxcrank.physics``: the description (``linkage``, ``drivers``, ``presets``, ``joints``,
+  ``laws``, ``memory``, ``params``, ``parameters``), its structure (``topology``,
+  ``planner``, ``closure``, ``assembly``), the compiled model (``compiled``) and the
+  equations (``state``, ``kinematics``, ``dynamics``, ``frame``, ``signals``, re-exported by
   ``model``; ``ideal``, ``reference``);
 - ``jaxcrank.numerics``: ``results``, ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``,
   ``steady``;
@@ -45,13 +46,14 @@ if TYPE_CHECKING:  # what type checkers and the API docs read; at run time each 
     from .numerics.solve import DEFAULTS, SOLVERS, Simulation, SimulationError, SolveOptions, simulate, solver_from_name
     from .numerics.steady import SteadyState, SteadyStateError, steady_state
     from .physics import ideal, laws, model, params, presets
+    from .physics.compiled import Model, compile_model
+    from .physics.drivers import ConstantSpeed, SpeedProfile, Torque
     from .physics.joints import JOINT_LAWS, Clearance, Ideal
     from .physics.laws import CONTACT_LAWS, FRICTION_LAWS
     from .physics.linkage import (
         AbstractMechanism,
         Body,
         BodyVector,
-        ConstantSpeed,
         Linkage,
         Outputs,
         Point,
@@ -59,9 +61,7 @@ if TYPE_CHECKING:  # what type checkers and the API docs read; at run time each 
         Prismatic,
         Revolute,
         Site,
-        SpeedProfile,
-        Torque,
-    )  # fmt: skip
+    )
     from .physics.memory import MEMORY_LAWS, FrozenMemory
     from .physics.parameters import get_parameter, parameter_value, set_parameter, set_parameters
     from .physics.params import Contact, Friction, Material, ParameterError
@@ -82,9 +82,11 @@ _FROM = {
     "physics": ("ideal", "laws", "model", "params", "presets"),
     "physics.joints": ("JOINT_LAWS", "Clearance", "Ideal"),
     "physics.laws": ("CONTACT_LAWS", "FRICTION_LAWS"),
+    "physics.compiled": ("Model", "compile_model"),
+    "physics.drivers": ("ConstantSpeed", "SpeedProfile", "Torque"),
     "physics.linkage": (
-        "AbstractMechanism", "Body", "BodyVector", "ConstantSpeed", "Linkage", "Outputs", "Point", "Pose",
-        "Prismatic", "Revolute", "Site", "SpeedProfile", "Torque",
+        "AbstractMechanism", "Body", "BodyVector", "Linkage", "Outputs", "Point", "Pose", "Prismatic", "Revolute",
+        "Site",
     ),
     "physics.memory": ("MEMORY_LAWS", "FrozenMemory"),
     "physics.parameters": ("get_parameter", "parameter_value", "set_parameter", "set_parameters"),
@@ -158,6 +160,7 @@ __all__ = [
     "Ideal",
     "Linkage",
     "Material",
+    "Model",
     "Outputs",
     "ParameterError",
     "Point",
@@ -170,6 +173,7 @@ __all__ = [
     "SpeedProfile",
     "Torque",
     "four_bar",
+    "compile_model",
     "get_parameter",
     "parameter_value",
     "preset",

@@ -51,10 +51,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from jaxcrank.physics.compiled import compile_model
 from jaxcrank.physics.parameters import get_parameter, set_parameters
 from jaxcrank.physics.params import ParameterError
 from jaxcrank.physics.presets import SliderCrank, paper
-from jaxcrank.physics.state import structure
 
 from .objective import EQ19, AbstractObjective, safe_sqrt
 from .problem import AbstractProblem, known_parameter
@@ -297,7 +297,7 @@ class DesignProblem(AbstractProblem):
     def clearance_joints(self) -> tuple[str, ...]:
         """The base mechanism's clearance joints (the tree's cut joints), whose RMS contact
         forces make the ``rms_contact_force_N`` term."""
-        return structure(self.base)[1].cut
+        return compile_model(self.base).tree.cut
 
     def loss(self, rms: dict) -> Float[Array, ""]:
         w = self.weight_of()

@@ -103,7 +103,8 @@ def window_starts(sim: Simulation) -> Starts:
 
 def clearances(mech: Mechanism) -> Float[Array, " joints"]:
     """Radial clearance of each clearance joint (the tree's cut joints, sorted), m."""
-    lk, tree = model.structure(mech)
+    compiled = model.compile_model(mech)
+    lk, tree = compiled.linkage, compiled.tree
     return jnp.stack([jnp.asarray(lk.joints[j].clearance, dtype=float) for j in tree.cut])
 
 
@@ -112,7 +113,8 @@ def start_state(mech: Mechanism, starts: Starts, i: Int[ArrayLike, ""]) -> Float
     in their bearings, moving the same way, with the same gap or penetration (a
     clearance change moves a revolute joint's pin radially by the change; a prismatic
     joint's eccentricity is kept)."""
-    lk, tree = model.structure(mech)
+    compiled = model.compile_model(mech)
+    lk, tree = compiled.linkage, compiled.tree
     d = starts.eccentricity[i]
     norm = safe_norm(d, axis=-1)[:, None]
     direction = jnp.where(norm > 0.0, d / jnp.where(norm > 0.0, norm, 1.0), 0.0)

@@ -46,8 +46,8 @@ from jaxtyping import Array, ArrayLike, Float
 
 from jaxcrank.numerics.solve import DEFAULTS, Simulation, SolveOptions, simulate, solver_from_name
 from jaxcrank.physics import model, signals
+from jaxcrank.physics.drivers import ConstantSpeed
 from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
-from jaxcrank.physics.linkage import ConstantSpeed
 from jaxcrank.physics.params import ParameterError
 
 #: the paper's Eq. 19 metric (degrees)
@@ -153,7 +153,7 @@ def sample_grid(
     rounded to whole sample steps and shrunk to divide the evaluation window.
 
     Raises:
-        ParameterError: the driver is not a [`jaxcrank.ConstantSpeed`][jaxcrank.physics.linkage.ConstantSpeed]
+        ParameterError: the driver is not a [`jaxcrank.ConstantSpeed`][jaxcrank.physics.drivers.ConstantSpeed]
             (equal times are equal driver angles only at constant speed), or ``mech.driver.speed``
             is not concrete (a traced design variable).
     """

@@ -65,7 +65,7 @@ def default_parameters(mech: Mechanism) -> tuple[str, ...]:
         return not isinstance(v, bool) and isinstance(v, float | int | np.floating | jax.Array) and np.ndim(v) == 0
 
     own = [f.name for f in dataclasses.fields(mech) if f.name != "gravity" and number(getattr(mech, f.name))]
-    _, tree = model.structure(mech)
+    tree = model.compile_model(mech).tree
     names = [*own, "driver.speed", *(f"clearance_{j}" for j in tree.cut)]
     for name in TIED_PARAMETERS:
         try:

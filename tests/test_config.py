@@ -35,7 +35,7 @@ def test_clearance_uses_the_hole_radius_set_beside_it():
 
 def test_clearance_in_a_toml_file(tmp_path):
     path = tmp_path / "c.toml"
-    path.write_text("clearance_B = 1e-4\n[contact]\nrestitution = 0.7\n")
+    path.write_text('mechanism = "slider-crank"\nclearance_B = 1e-4\n[contact]\nrestitution = 0.7\n')
     mech = config.load(path)
     assert get_parameter(mech, "clearance_B") == pytest.approx(1e-4, rel=0.0, abs=1e-15)
     assert float(mech.joints["B"].contact.restitution) == float(mech.joints["C"].contact.restitution) == 0.7

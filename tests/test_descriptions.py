@@ -84,20 +84,36 @@ def test_an_unknown_point():
     _refused(lambda: jc.Linkage(**_crank_rocker(connections={"B": bad})), "joint 'B'", "'coupler'", "no point 'C'")
 
 
-def test_a_loop_of_ideal_joints_with_no_closure():
-    message = _refused(lambda: jc.Linkage(**_crank_rocker(joints={"B": jc.Ideal()})), "A, B, O2, O4")
-    assert "no clearance joint and no closure" in message
+def _compiled(**changes):
+    """The crank-rocker with ``changes``, compiled (where its structure and assembly are checked)."""
+    return jc.compile_model(jc.Linkage(**_crank_rocker(**changes)))
+
+
+def test_a_loop_of_ideal_joints_is_closed_in_the_dynamics():
+    """With B ideal too the loop O2-A-B-O4 has no clearance joint: the coupler and the
+    rocker follow the crank by a dyad, and no coordinate is left."""
+    model = _compiled(joints={"B": jc.Ideal()})
+    assert model.tree.n == 0 and {b for c in model.tree.closures for b in c.bodies} == {"coupler", "rocker"}
+
+
+def test_a_body_fixed_twice_over():
+    ground = {"O2": jc.Point(), "O4": jc.Point(0.40, 0.0), "X": jc.Point(0.40, 0.30)}
+    second = jc.Revolute(hole=jc.Site("ground", "X"), pin=jc.Site("rocker", "B"))
+    connections = {**_crank_rocker()["connections"], "X": second}
+    joints = {**_crank_rocker()["joints"], "X": jc.Ideal()}
+    message = _refused(lambda: _compiled(ground=ground, connections=connections, joints=joints), "'rocker'", "O4, X")
+    assert "twice over" in message
 
 
 def test_a_linkage_that_cannot_be_assembled_at_its_start_angle():
     coupler = jc.Body(1.2, 1.2e-2, {"A": jc.Point(), "B": jc.Point(0.70, 0.0)}, jc.Point(0.35, 0.0))
-    message = _refused(lambda: jc.Linkage(**_crank_rocker(bodies={"coupler": coupler})), "A, B, O4")
+    message = _refused(lambda: _compiled(bodies={"coupler": coupler}), "A, B, O4")
     assert "cannot be assembled at its start angle 0 deg" in message
 
 
 def test_a_driver_on_a_body_not_attached_to_the_ground():
     driver = jc.ConstantSpeed(body="coupler", speed=62.83)
-    message = _refused(lambda: jc.Linkage(**_crank_rocker(driver=driver)), "'coupler'")
+    message = _refused(lambda: _compiled(driver=driver), "'coupler'")
     assert "not attached to the ground" in message
     _refused(lambda: jc.Linkage(**_crank_rocker(driver=jc.ConstantSpeed(body="wheel", speed=1.0))), "'wheel'")
 
@@ -167,10 +183,16 @@ def _errors():
 
         return change
 
-    def all_ideal(d):
-        for j in ("B", "O4"):
-            d["joints"][j] = {k: v for k, v in d["joints"][j].items() if k in ("type", "hole", "pin")}
-            d["joints"][j]["law"] = "ideal"
+    def fixed_twice(d):
+        d["ground"]["X"] = [0.40, 0.30]
+        d["joints"]["X"] = {"type": "revolute", "hole": "ground.X", "pin": "rocker.B", "law": "ideal"}
+        d["joints"]["O4"] = {"type": "revolute", "hole": "ground.O4", "pin": "rocker.O4", "law": "ideal"}
+
+    def empty(d):
+        d.clear()
+
+    def misplaced_branch(d):
+        d["joints"]["O4"]["branch"] = "+"
 
     def guide_law(d):
         d["joints"]["B"] = {k: v for k, v in d["joints"]["B"].items() if k in ("type", "hole", "pin")}
@@ -182,7 +204,9 @@ def _errors():
     return [
         (set_(("joints", "B", "pin"), "rokker.B"), "a joint on a body that does not exist"),
         (set_(("joints", "B", "hole"), "coupler.C"), "a point a body does not have"),
-        (all_ideal, "a loop of ideal joints only"),
+        (empty, "a file that describes no mechanism"),
+        (fixed_twice, "a body fixed twice over"),
+        (misplaced_branch, "a branch where no dyad meets"),
         (set_(("bodies", "coupler", "points", "B"), [0.70, 0.0]), "links that cannot reach at the start"),
         (set_(("bodies", "coupler", "points", "B"), [0.10, 0.0]), "links that lock before a full turn"),
         (set_(("driver", "body"), "coupler"), "a driver on a body not pivoted on the ground"),

@@ -299,7 +299,9 @@ def unknown_keys(draw):
         return draw(
             _IDENT.filter(
                 lambda k: (
-                    k not in plain and not k.startswith("clearance_") and k not in ("contact", "friction", "memory")
+                    k not in plain
+                    and not k.startswith("clearance_")
+                    and k not in ("contact", "friction", "memory", "mechanism")
                 )
             )
         )
@@ -315,7 +317,7 @@ def unknown_keys(draw):
 def test_drawn_bad_toml_raises_a_named_error(case):
     path, value = case
     try:
-        text = tomli_w.dumps(_nest(path, value))
+        text = tomli_w.dumps({"mechanism": "slider-crank", **_nest(path, value)})
     except (TypeError, ValueError):  # a value TOML cannot hold (e.g. a list of mixed types)
         return
     with tempfile.TemporaryDirectory() as tmp:

@@ -430,9 +430,9 @@ def _solve(mech, t1, tol, n=51):
 
 
 def _index(mech, what, name):
-    from jaxcrank.physics import state
+    from jaxcrank.physics import compiled
 
-    return getattr(state.structure(mech)[1], what).index(name)
+    return getattr(compiled.compile_model(mech).tree, what).index(name)
 
 
 @pytest.mark.slow  # compiles a solve and the output frame: about a minute

@@ -11,7 +11,7 @@ import pytest
 
 import jaxcrank as jc
 from jaxcrank import ideal
-from jaxcrank.physics import closure, model
+from jaxcrank.physics import model
 from jaxcrank.physics.dynamics import mass_vector
 from jaxcrank.physics.linkage import GROUND, Prismatic, world_point
 
@@ -20,8 +20,8 @@ MECHANISMS = {"paper": jc.paper, "four-bar": jc.four_bar}
 
 def _sites(mech, t):
     """World positions of every joint's two sites at time t, by joint name, and the poses."""
-    lk, tree = model.structure(mech)
-    frames = closure.ideal_poses(mech, ideal.driver_angle(mech, t))
+    lk, tree = model.compile_model(mech).linkage, model.compile_model(mech).tree
+    frames = model.ideal_poses(mech, ideal.driver_angle(mech, t))
     poses = {b: frames[i] for i, b in enumerate(tree.bodies)}
     poses[GROUND] = jnp.zeros(3)
 
@@ -37,7 +37,7 @@ def test_positions_satisfy_loop_closure(name):
     """Every revolute joint's hole and pin points coincide; a prismatic joint's slider
     point lies on its guide's axis at the joint's angle (1e-15 m, 1e-15 rad)."""
     mech = MECHANISMS[name]()
-    lk, _ = model.structure(mech)
+    lk, _ = model.compile_model(mech).linkage, model.compile_model(mech).tree
     for t in np.linspace(0, 0.1, 7):
         sites, poses = _sites(mech, t)
         for j, (a, b) in sites.items():
@@ -94,7 +94,7 @@ def test_four_bar_transmission_angle_is_the_coupler_rocker_angle():
 def test_ideal_driving_moment_balances_power(name):
     # virtual power: M omega = d/dt(kinetic + potential) for the ideal mechanism, every body
     mech = MECHANISMS[name]()
-    lk, tree = model.structure(mech)
+    lk, tree = model.compile_model(mech).linkage, model.compile_model(mech).tree
     mass = mass_vector(mech)
     weights = jnp.array([lk.bodies[b].mass * lk.gravity for b in tree.bodies])
 

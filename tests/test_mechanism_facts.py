@@ -14,7 +14,6 @@ import pytest
 import jaxcrank as jc
 from jaxcrank import ideal, laws, model, outputs
 from jaxcrank.analysis.validation import wall_impact
-from jaxcrank.physics import closure
 from jaxcrank.physics.dynamics import mass_vector
 
 MECHANISMS = ("four-bar", "slider-crank-A")
@@ -36,7 +35,7 @@ def _with_guesses(mech, shift=2e-3, turn=0.05):
     moved by (shift, -shift) m and turned by ``turn`` rad, so that Newton's method starts
     away from the answer (the dyads pick their branch by the guesses too)."""
     lk = mech.linkage()
-    poses = np.asarray(closure.ideal_poses(mech, lk.driver.initial_angle))
+    poses = np.asarray(model.ideal_poses(mech, lk.driver.initial_angle))
     guesses = {b: jc.Pose(*(poses[i] + [shift, -shift, turn])) for i, b in enumerate(sorted(lk.bodies))}
     bodies = {b: eqx.tree_at(lambda x: x.guess, lk.bodies[b], g, is_leaf=_none) for b, g in guesses.items()}
     return eqx.tree_at(lambda x: x.bodies, lk, bodies)
@@ -44,8 +43,8 @@ def _with_guesses(mech, shift=2e-3, turn=0.05):
 
 @jax.jit
 def _closure_pair(lk, phis):
-    dyads = jax.vmap(lambda p: closure.ideal_poses(lk, p))(phis)
-    newton = jax.vmap(lambda p: closure.newton_poses(lk, p))(phis)
+    dyads = jax.vmap(lambda p: model.ideal_poses(lk, p))(phis)
+    newton = jax.vmap(lambda p: model.newton_poses(lk, p))(phis)
     return dyads, newton
 
 
@@ -60,7 +59,7 @@ def test_dyads_in_closed_form_equal_newtons_loop_closure(name):
     lk = _with_guesses(mech)
     phis = lk.driver.initial_angle + jnp.linspace(0.0, 2.0 * np.pi, 73)[:-1]
     dyads, newton = (np.array(x) for x in _closure_pair(lk, phis))
-    plain = np.array(jax.vmap(lambda p: closure.ideal_poses(mech, p))(phis))
+    plain = np.array(jax.vmap(lambda p: model.ideal_poses(mech, p))(phis))
     for other in (newton, plain):
         diff = dyads - other
         diff[..., 2] = _wrap(diff[..., 2])
@@ -102,7 +101,7 @@ def _tiny(name, clearance):
     """The preset with ``clearance`` (m) at each of its clearance joints and contact 1000
     times stiffer (E = 207 TPa for pins and holes)."""
     mech = jc.preset(name)
-    mech = jc.with_clearance(mech, **{j: clearance for j in model.structure(mech)[1].cut})
+    mech = jc.with_clearance(mech, **{j: clearance for j in model.compile_model(mech).tree.cut})
     for part in ("pin_material", "hole_material"):
         mech = jc.set_parameter(mech, f"{part}.youngs_modulus", 207e12)
     return mech
@@ -115,7 +114,7 @@ def _deviation_and_bound(name, clearance, t1=0.02):
     mech = _tiny(name, clearance)
     sim = jc.simulate(mech, t1, n_samples=201)
     f = outputs.frames(sim)
-    tree = model.structure(mech)[1]
+    tree = model.compile_model(mech).tree
     rho = {j: clearance + max(float(jnp.max(f.penetration[:, tree.joints.index(j)])), 0.0) for j in tree.cut}
     if name == "four-bar":
         # first order in play / length: the loop a e1 + b e3 - c e4 - (D - A) = -u with
@@ -172,7 +171,7 @@ def _inverse_mass(mech):
     """The inverse mass W of the clearance joints' eccentricities (d'' = W F for forces F
     on their pins, the mechanism at its start), from the tree's mass matrix M and the
     eccentricities' Jacobian J: W = J M^-1 J^T, (2 cut joints, 2 cut joints)."""
-    tree = model.structure(mech)[1]
+    tree = model.compile_model(mech).tree
     n = tree.n
     y0 = model.initial_state(mech)
     scale = model.state_scales(mech)
@@ -211,7 +210,7 @@ def test_isolated_impact_in_the_mechanism_keeps_the_restitution_relation(name, j
     (tests/test_wall_impact.py; measured here: 9.8e-5 and 7.7e-6 at the pivot A, 2.5e-4 at B, 2.2e-4 at C)."""
     mech = jc.preset(name)
     mech = jc.set_parameters(mech, ["gravity", "friction.coefficient", "driver.speed"], jnp.array([0.0, 0.0, 1.0]))
-    tree = model.structure(mech)[1]
+    tree = model.compile_model(mech).tree
     law = mech.joints[joint]
     speed, gap, c = 0.5, 1e-6, float(law.clearance)
     k = tree.cut.index(joint)
@@ -239,7 +238,7 @@ def test_wall_rig_with_the_mechanisms_own_joint_law(name):
     """The free-pin rig driven by each clearance joint law of the mechanism (friction off:
     the rig's pin does not slide): the rebound follows the exact relation to 1 %."""
     mech = jc.preset(name)
-    for j in model.structure(mech)[1].cut:
+    for j in model.compile_model(mech).tree.cut:
         law = eqx.tree_at(lambda x: x.friction.coefficient, mech.joints[j], 0.0)
         exact = laws.achieved_restitution(float(law.contact.law.hysteresis_factor(law.contact.restitution)))
         for speed in (0.01, 0.5):
@@ -255,7 +254,7 @@ WINDOWS = {"four-bar": 2.0e-3, "slider-crank-A": 1.6e-3}
 
 def _rms_deviation_mm(name, p, adjoint):
     base = jc.preset(name)
-    names = ["crank_length", f"clearance_{model.structure(base)[1].cut[0]}"]
+    names = ["crank_length", f"clearance_{model.compile_model(base).tree.cut[0]}"]
     mech = jc.set_parameters(base, names, p)
     sim = jc.simulate(
         mech,

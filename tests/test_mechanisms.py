@@ -29,7 +29,7 @@ CUT = {
 @pytest.mark.parametrize("name", list(jc.PRESETS))
 def test_every_preset_builds_its_linkage(name):
     mech = jc.preset(name)
-    lk, tree = model.structure(mech)
+    lk, tree = model.compile_model(mech).linkage, model.compile_model(mech).tree
     assert set(lk.joints) == set(lk.connections) and tree.cut
     if name in CUT:
         assert tree.cut == CUT[name]
@@ -43,7 +43,7 @@ def test_the_command_line_takes_the_new_presets():
     config.add_mechanism_arguments(p, "simulate")
     for name in CUT:
         mech = config.mechanism_from_arguments(p.parse_args(["--mechanism", name]))
-        assert model.structure(mech)[1].cut == CUT[name]
+        assert model.compile_model(mech).tree.cut == CUT[name]
 
 
 # --------------------------------------------------------------------------- every subset of clearance joints
@@ -90,7 +90,7 @@ def test_every_subset_of_clearance_joints_simulates(kind, subset):
     stays on its guide line) and every clearance joint's eccentricity is its pin site
     minus its hole site, to 1e-12 m."""
     mech = _variant(kind, subset)
-    lk, tree = model.structure(mech)
+    lk, tree = model.compile_model(mech).linkage, model.compile_model(mech).tree
     assert tree.cut == subset
     n_ideal = len(lk.connections) - len(subset)
     assert tree.n == 3 * len(lk.bodies) - 2 * n_ideal - 1
@@ -111,10 +111,23 @@ def test_every_subset_of_clearance_joints_simulates(kind, subset):
                 assert np.linalg.norm(pin - hole) < 1e-12, (j, float(sim.ts[i]))
 
 
-def test_a_mechanism_with_every_joint_ideal_is_refused():
-    with pytest.raises(jc.ParameterError, match="no clearance joint and no closure") as err:
-        _variant("slider-crank", ()).linkage()
-    assert "A, B, C, guide" in str(err.value)
+@pytest.mark.parametrize("kind", list(REVOLUTES))
+def test_a_mechanism_with_every_joint_ideal_moves_as_the_ideal_mechanism(kind):
+    """With every joint ideal the loop is closed in the dynamics by a dyad: no coordinate
+    is left, and the motion is the ideal mechanism's (poses to 1e-12 m and rad); each
+    joint's reaction equals the ideal mechanism's inverse dynamics (to 1e-9 of the largest)
+    and so does the driving moment."""
+    mech = _variant(kind, ())
+    compiled = model.compile_model(mech)
+    assert compiled.tree.n == 0 and len(compiled.tree.closures) == 1
+    sim = jc.simulate(mech, 0.02, n_samples=21)
+    frames = outputs.frames(sim)
+    np.testing.assert_allclose(np.asarray(frames.q), np.asarray(frames.ideal_q), rtol=0, atol=1e-12)
+    forces, torques = jax.vmap(lambda t: ideal.joint_reactions(mech, t))(sim.ts)
+    expected = np.stack([np.linalg.norm(np.asarray(forces[j]), axis=-1) for j in compiled.tree.joints], axis=1)
+    scale = np.max(expected)
+    np.testing.assert_allclose(np.asarray(frames.normal_force), expected, rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(np.asarray(frames.driving_moment), np.asarray(torques), rtol=0, atol=1e-9 * scale)
 
 
 # --------------------------------------------------------------------------- Flores and Ambrósio's slider-crank
@@ -166,7 +179,7 @@ def test_flores_simulates_its_first_impacts():
     """3 ms (a quarter turn at 5000 rpm): the solve succeeds and pin C hits its bearing."""
     mech = jc.preset("flores")
     sim = jc.simulate(mech, 3e-3, n_samples=31)
-    k = model.structure(mech)[1].joints.index("C")
+    k = model.compile_model(mech).tree.joints.index("C")
     force = np.asarray(outputs.frames(sim).normal_force[:, k])
     assert np.all(np.isfinite(np.asarray(sim.ys))) and force.max() > 0.0
 

@@ -18,7 +18,7 @@ LAYOUTS = [(), ("B",), ("C",)]
 @pytest.mark.parametrize("ideal_names", LAYOUTS)
 def test_state_layout_follows_the_clearance_joints(paper, ideal_names):
     mech = with_ideal(paper, *ideal_names)
-    _, tree = model.structure(mech)
+    _, tree = model.compile_model(mech).linkage, model.compile_model(mech).tree
     names = tree.cut
     assert names == tuple(n for n in "BC" if n not in ideal_names)
     k = len(names)
@@ -33,10 +33,13 @@ def test_state_layout_follows_the_clearance_joints(paper, ideal_names):
     assert float(s.driver_work) == float(phys[-2]) and float(s.dissipated_work) == float(phys[-1])
 
 
-def test_a_loop_of_ideal_joints_is_refused(paper):
-    """Every loop needs a joint with clearance (the tree integrates ideal joints only)."""
-    with pytest.raises(jc.ParameterError, match="no clearance joint"):
-        model.structure(with_ideal(paper, "B", "C"))
+def test_a_loop_of_ideal_joints_is_closed_by_a_dyad(paper):
+    """With B and C ideal the slider-crank's loop has no clearance joint: the rod and the
+    slider follow the crank through the closed-form dyad, and no coordinate is left."""
+    compiled = model.compile_model(with_ideal(paper, "B", "C"))
+    assert compiled.tree.n == 0
+    (dyad,) = compiled.tree.closures
+    assert (dyad.kind, set(dyad.bodies), set(dyad.joints)) == ("RRP", {"rod", "slider"}, {"B", "C", "guide"})
 
 
 @pytest.mark.parametrize("ideal_names", [("B",), ("C",)])

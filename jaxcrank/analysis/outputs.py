@@ -16,7 +16,6 @@ from jaxtyping import Array, ArrayLike, Float
 from ..numerics.solve import Simulation
 from ..physics import model
 from ..physics.params import ParameterError
-from ..physics.state import structure
 from .metrics import DEG, headline
 
 _BODY_COLUMNS = (
@@ -46,7 +45,8 @@ def columns(mech) -> dict[str, str]:
     ``<body>_angle``, ``<body>_vx``, ``<body>_omega``, ``<body>_alpha``, ...) and the ideal
     mechanism's (``ideal_<body>_x``, ...); each joint's eccentricity, penetration, normal
     and friction force and slip speed; driving moments; transmission angles; energies."""
-    _, tree = structure(mech)
+    model_ = model.compile_model(mech)
+    tree = model_.tree
     out = {"t": "s"}
     for prefix in ("", "ideal_"):
         for b in tree.bodies:
@@ -56,7 +56,7 @@ def columns(mech) -> dict[str, str]:
         for pattern, unit in _JOINT_COLUMNS:
             out[pattern.format(j)] = unit
     out.update({"driving_moment": "N m", "ideal_driving_moment": "N m"})
-    if mech.linkage().outputs.transmission is not None:
+    if model_.linkage.outputs.transmission is not None:
         out.update({"transmission_angle": "deg", "ideal_transmission_angle": "deg"})
     for k in ("kinetic_energy", "potential_energy", "contact_energy", "driver_work", "dissipated_work"):
         out[k] = "J"
@@ -74,14 +74,14 @@ def frames(sim: Simulation) -> model.Frame:
 
     One compiled program with the parameters traced, so every mechanism of the same
     structure and sample count reuses it."""
-    return _frames(sim.mechanism, sim.ts, sim.ys)
+    return _frames(model.compile_model(sim.mechanism), sim.ts, sim.ys)
 
 
 def trajectory(sim: Simulation) -> dict[str, Float[np.ndarray, " n"]]:
     """Named output columns of a simulation (SI, angles in degrees;
     [`columns`][jaxcrank.analysis.outputs.columns] gives their units)."""
     mech = sim.mechanism
-    _, tree = structure(mech)
+    tree = model.compile_model(mech).tree
     f = frames(sim)
     cols = {"t": f.t}
     for prefix, q, qd, qdd in (("", f.q, f.qd, f.qdd), ("ideal_", f.ideal_q, f.ideal_qd, f.ideal_qdd)):
@@ -102,6 +102,25 @@ def trajectory(sim: Simulation) -> dict[str, Float[np.ndarray, " n"]]:
     for k in ("kinetic_energy", "potential_energy", "contact_energy", "driver_work", "dissipated_work"):
         cols[k] = getattr(f, k)
     return {k: np.asarray(cols[k]) for k in columns(mech)}
+
+
+@jax.jit
+def _closure_residuals(compiled, ts, ys):
+    def one(t, y):
+        s = model.unpack(compiled, y).deviation
+        return model.closure_residuals(compiled, model.positions(compiled, s, t))
+
+    return jax.vmap(one)(ts, ys)
+
+
+def closure_residual(sim: Simulation) -> float:
+    """The largest distance between the two sides of an ideal joint over the samples of
+    ``sim``, m (0.0 for a mechanism without ideal joints): the loops of ideal joints close
+    to rounding."""
+    compiled = model.compile_model(sim.mechanism)
+    if not compiled.structure.ideal_joints:
+        return 0.0
+    return float(jnp.max(_closure_residuals(compiled, sim.ts, sim.ys)))
 
 
 def transmission_angle_error(mech, ts: Float[ArrayLike, " n"], ys: Float[ArrayLike, "n state"]) -> Float[Array, " n"]:

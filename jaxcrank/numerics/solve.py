@@ -194,10 +194,12 @@ def _with_tolerances(solver, controller):
 
 @eqx.filter_jit
 def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, progress_meter, metrics_start):
-    """``ts``: the sample times to save (None: only the end state); ``span``: the
-    first and last sample time and their count (the samples tracked metrics visit)."""
+    """``mech``: the mechanism as given (kept in the result); ``ts``: the sample times to
+    save (None: only the end state); ``span``: the first and last sample time and their
+    count (the samples tracked metrics visit)."""
     term = diffrax.ODETerm(model.vector_field)
-    y0 = model.initial_state(mech) if y0 is None else y0
+    compiled = model.compile_model(mech)
+    y0 = model.initial_state(compiled) if y0 is None else y0
     first, last, count = span
     tracked = metrics_start is not None
     if tracked:
@@ -214,7 +216,7 @@ def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, prog
         last,
         dt0,
         y0,
-        args=mech,
+        args=compiled,
         saveat=saveat,
         stepsize_controller=controller,
         adjoint=adjoint,
@@ -226,7 +228,7 @@ def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, prog
     if tracked:
         tracked_metrics = {
             "window_start_s": jnp.asarray(metrics_start, dtype=float),
-            **tracking.finish(sol.solver_state[1], mech),
+            **tracking.finish(sol.solver_state[1], compiled),
         }
     return Simulation(
         mech,
@@ -313,6 +315,7 @@ def simulate(
     Works under ``jax.jit``, ``jax.grad`` and ``jax.vmap`` (with ``throw=True``
     inside a trace, failures raise through ``equinox.error_if``).
     """
+    model.compile_model(mech)  # the description's structure and assembly, checked before anything is traced
     if ts is None and not save_samples and metrics_start is not None:
         # only the span: no array of sample times is built (traceable in t1)
         if n_samples is None:

@@ -154,8 +154,8 @@ def carry_state(old: Mechanism, y: Float[Array, " state"], new: Mechanism) -> Fl
         ValueError: when the clearance joints' eccentricities do not determine the
             coordinates (see [`jaxcrank.physics.kinematics.state_from_eccentricities`][])."""
     d, dd = model.joint_eccentricities(old, 0.0, y)
-    lk_old, tree = model.structure(old)
-    lk_new, _ = model.structure(new)
+    old_model, new_model = model.compile_model(old), model.compile_model(new)
+    lk_old, lk_new, tree = old_model.linkage, new_model.linkage, old_model.tree
     ratio = jnp.stack([lk_new.joints[j].clearance / lk_old.joints[j].clearance for j in tree.cut])
     guess = y * model.state_scales(old) / model.state_scales(new)
     return model.state_from_eccentricities(
@@ -169,7 +169,7 @@ def _warm_state(mech, warm):
     have clearance) or a scaled state array."""
     if isinstance(warm, SteadyState):
         old, y = warm.mechanism, warm.section_state
-        if model.structure(old)[1] == model.structure(mech)[1]:
+        if model.compile_model(old).structure == model.compile_model(mech).structure:
             try:
                 y = carry_state(old, y, mech)
             except ValueError:

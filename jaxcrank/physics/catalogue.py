@@ -20,9 +20,9 @@ away (an all-ideal mechanism included).
 
 from __future__ import annotations
 
+from .drivers import ConstantSpeed
 from .joints import Clearance, Ideal
 from .laws import Ambrosio, LankaraniNikravesh
-from .linkage import ConstantSpeed
 from .lubrication import Lubricated
 from .params import Contact, Friction, Material
 from .presets import RPM, FourBar, SliderCrank, with_clearance

@@ -1,23 +1,22 @@
-"""The ideal mechanism (every joint ideal, every loop closed) as a function of the
-driver's angle.
+"""Closing loops of ideal joints: the dyads in closed form, a root find for the rest, and
+the ideal mechanism (every joint ideal) as a function of the driver's angle.
 
-[`ideal_poses`][jaxcrank.physics.closure.ideal_poses] places the driven body on its ground pivot at the angle phi,
-then follows the assembly [`Plan`][jaxcrank.physics.topology.Plan]:
+- **Dyads** ([`Dyad`][jaxcrank.physics.topology.Dyad]) in closed form: RRR puts the middle
+  pin at an intersection of two circles, RRP of a circle and a line, RPR (a block on a
+  turning guide: the crank-shaper, the oscillating cylinder) turns the guide so that its
+  line passes through the block's pin, and PRP meets two lines. Each of the first three
+  has two branches (``sign`` +1 or -1): [`branch`][jaxcrank.physics.closure.branch] reads
+  a pose's branch, [`branch_signs`][jaxcrank.physics.closure.branch_signs] chooses the
+  ideal mechanism's once, at the driver's initial angle (a joint's ``branch``, else the
+  bodies' ``guess`` poses, else +1).
+- **Groups** ([`Group`][jaxcrank.physics.topology.Group]) by Newton's method in a loop that
+  XLA runs as a loop, from a warm start, to a tolerance; derivatives by the implicit
+  function theorem (``jax.custom_jvp``), exact whatever the iterations did.
 
-- **dyads in closed form.** An RRR dyad (two bodies pinned to known bodies and to each
-  other) puts their common pin at an intersection of two circles; an RRP dyad (one of
-  them sliding on a known guide) at an intersection of a circle and a line. The slider-
-  crank and the four-bar are one dyad each. Which intersection (the assembly mode) is
-  chosen once, at the driver's initial angle, as the one nearer the bodies'
-  ``guess`` poses (the first when there is none), and kept for every angle.
-- **Newton's method** closes whatever the dyads do not reach: from the bodies' guesses
-  at the initial angle, continued in steps to phi, then polished; its derivatives come
-  from the implicit function theorem (``jax.custom_jvp``), so they are exact whatever
-  the iterations did.
-
-Everything is differentiable in the linkage's parameters and in phi, to any order; the
-dyads also run on [`Jet`][jaxcrank.physics.safemath.Jet]s (a value with its first two time derivatives,
-in one pass) and on NumPy arrays (the assembly check, over a whole turn at once).
+Everything is differentiable in the linkage's parameters and in the driver's angle, to any
+order; the dyads also run on [`Jet`][jaxcrank.physics.safemath.Jet]s (a value with its first
+two time derivatives, in one pass) and on NumPy arrays (the assembly check, over a whole
+turn at once).
 """
 
 from __future__ import annotations
@@ -26,12 +25,9 @@ import math
 
 import jax
 import jax.numpy as jnp
-import numpy as np
-from jaxtyping import Array, ArrayLike, Float
 
-from .forward import GROUND_FRAME, Placed
-from .linkage import GROUND, AbstractMechanism, Linkage, Prismatic
-from .params import ParameterError, _concrete
+from .forward import GROUND_FRAME, BodyState, Placed, local_point
+from .linkage import GROUND, Linkage
 from .safemath import (
     add,
     atan2,
@@ -53,21 +49,17 @@ from .safemath import (
     vturn,
     where,
 )
-from .topology import Plan, Skeleton, plan_of, tree_of
+from .topology import Dyad, Group, Plan
 
-#: Newton steps of the loop closure: continuation steps from the initial angle, and
-#: iterations per step and at the end (quadratic convergence: a guess within a few
-#: degrees of crank angle is polished to rounding in these).
-CONTINUATION_STEPS = 24
-ITERATIONS = 4
+#: Newton's method of a group: iterations at most, and the step (m, rad) below which it stops
+ITERATIONS = 40
+TOLERANCE = 1e-13
 
-
-def _local(lk: Linkage, site) -> tuple:
-    return (lk.ground if site.body == GROUND else lk.bodies[site.body].points)[site.point].pair()
+_SIGNS = {"+": 1.0, "positive": 1.0, "-": -1.0, "negative": -1.0}
 
 
 def _site_world(lk: Linkage, frames: dict, site) -> tuple:
-    return frames[site.body].point(_local(lk, site))
+    return frames[site.body].point(local_point(lk, site))
 
 
 def _placed_by_point(world: tuple, local: tuple, angle, rot=None) -> Placed:
@@ -84,27 +76,28 @@ def _turning(local: tuple, world: tuple, length) -> tuple:
     return div(vdot(local, world), scale), div(vcross(local, world), scale)
 
 
-def _other_site(conn, body):
+def _sides(conn, body: str) -> tuple:
+    """(the site of ``conn`` on ``body``, the site on its other side)."""
     a, b = conn.sites()
-    return (b, a) if a.body == body else (a, b)
+    return (a, b) if a.body == body else (b, a)
 
 
-def _slide_line(lk: Linkage, frames: dict, conn: Prismatic, body: str, local_point) -> tuple:
-    """For ``body`` held by the prismatic ``conn`` to a known body: its angle, and the
-    line ``B0 + lam d`` its point ``local_point`` moves on (B0, d), as pairs."""
-    if conn.slider.body == body:  # it slides on a known guide
+def _slide_line(lk: Linkage, frames: dict, conn, body: str, local_point_) -> tuple:
+    """For ``body`` held by the prismatic ``conn`` to a placed body: its angle, and the
+    line ``B0 + lam d`` its point ``local_point_`` moves on (B0, d), as pairs."""
+    if conn.slider.body == body:  # it slides on a placed guide
         guide = frames[conn.guide.body]
         angle = add(guide.angle, conn.angle)
         d_angle = add(guide.angle, conn.direction)
         g = _site_world(lk, frames, conn.guide)
-        own = _local(lk, conn.slider)
-    else:  # it is the guide, moving along a known slider
+        own = local_point(lk, conn.slider)
+    else:  # it is the guide, moving along a placed slider
         slider = frames[conn.slider.body]
         angle = sub(slider.angle, conn.angle)
         d_angle = add(angle, conn.direction)
         g = _site_world(lk, frames, conn.slider)
-        own = _local(lk, conn.guide)
-    b0 = vadd(g, vturn(cos_sin(angle), vsub(local_point, own)))
+        own = local_point(lk, conn.guide)
+    b0 = vadd(g, vturn(cos_sin(angle), vsub(local_point_, own)))
     return angle, b0, cos_sin(d_angle)
 
 
@@ -120,22 +113,49 @@ def _length(v: tuple):
     return sqrt(add(mul(v[0], v[0]), mul(v[1], v[1])))
 
 
-def _dyad(lk: Linkage, frames: dict, step, sign) -> tuple[dict, object]:
-    """Place the two bodies of one dyad; returns the new frames and the discriminant of
-    its intersection (negative: it cannot be assembled)."""
-    outer, middle, other = (lk.connections[j] for j in (step.outer, step.middle, step.other))
+def _dyad(lk: Linkage, frames: dict, step: Dyad, sign) -> tuple[dict, object]:
+    """Place the two bodies of one dyad on the branch ``sign``; returns the new frames and
+    the discriminant of its intersection (negative: it cannot be assembled)."""
+    outer, middle, other = (lk.connections[j] for j in step.joints)
     u, v = step.first, step.second
-    u_site, k1 = _other_site(outer, u)[::-1]
+    u_site, k1 = _sides(outer, u)
     p1 = _site_world(lk, frames, k1)
-    a_u = _local(lk, u_site)
-    m_u, m_v = (_other_site(middle, v)[0], _other_site(middle, u)[0])  # middle's site on u, on v
-    b_u, b_v = _local(lk, m_u), _local(lk, m_v)
+    a_u = local_point(lk, u_site)
+    out = dict(frames)
+    if step.kind == "RPR":
+        v_site, k2 = _sides(other, v)
+        p2 = _site_world(lk, frames, k2)
+        c_v = local_point(lk, v_site)
+        e = cos_sin(middle.direction)  # the guide's line in the frame of u, which carries it
+        w = vturn(cos_sin(middle.angle), vsub(local_point(lk, middle.slider), c_v))
+        h = vcross(e, vsub(vadd(a_u, w), local_point(lk, middle.guide)))
+        arm = vsub(p2, p1)
+        arm2 = vdot(arm, arm)
+        disc = sub(arm2, mul(h, h))
+        along = mul(sign, _sqrt_or_nan(disc))
+        d = vscale(div(1.0, arm2), vadd(vscale(along, arm), vscale(h, vperp(arm))))  # the line's direction
+        rot = (vdot(e, d), vcross(e, d))
+        angle_u = atan2(rot[1], rot[0])
+        out[u] = _placed_by_point(p1, a_u, angle_u, rot)
+        out[v] = _placed_by_point(p2, c_v, add(angle_u, middle.angle))
+        return out, disc
+    m_u, m_v = _sides(middle, u)
+    b_u, b_v = local_point(lk, m_u), local_point(lk, m_v)
+    if step.kind == "PRP":
+        angle_u, b0_u, d_u = _slide_line(lk, frames, outer, u, b_u)
+        angle_v, b0_v, d_v = _slide_line(lk, frames, other, v, b_v)
+        disc = vcross(d_u, d_v)  # zero: parallel lines
+        lam = div(vcross(vsub(b0_v, b0_u), d_v), disc)
+        b = vadd(b0_u, vscale(lam, d_u))
+        out[u] = _placed_by_point(b, b_u, angle_u)
+        out[v] = _placed_by_point(b, b_v, angle_v)
+        return out, mul(disc, disc)
     link_u = vsub(b_u, a_u)
     r1 = _length(link_u)
     if step.kind == "RRR":
-        v_site, k2 = _other_site(other, v)[::-1]
+        v_site, k2 = _sides(other, v)
         p3 = _site_world(lk, frames, k2)
-        c_v = _local(lk, v_site)
+        c_v = local_point(lk, v_site)
         link_v = vsub(b_v, c_v)
         r2 = _length(link_v)
         w = vsub(p3, p1)
@@ -147,7 +167,7 @@ def _dyad(lk: Linkage, frames: dict, step, sign) -> tuple[dict, object]:
         arm_v = vsub(b, p3)
         angle_v = sub(atan2(arm_v[1], arm_v[0]), atan2(link_v[1], link_v[0]))
         frame_v = _placed_by_point(p3, c_v, angle_v, _turning(link_v, arm_v, r2))
-    else:
+    else:  # RRP
         angle_v, b0, d = _slide_line(lk, frames, other, v, b_v)
         w = vsub(b0, p1)
         dw = vdot(d, w)
@@ -157,16 +177,43 @@ def _dyad(lk: Linkage, frames: dict, step, sign) -> tuple[dict, object]:
         frame_v = _placed_by_point(b, b_v, angle_v)
     arm_u = vsub(b, p1)
     angle_u = sub(atan2(arm_u[1], arm_u[0]), atan2(link_u[1], link_u[0]))
-    out = dict(frames)
     out[u] = _placed_by_point(p1, a_u, angle_u, _turning(link_u, arm_u, r1))
     out[v] = frame_v
     return out, disc
 
 
-def _driven_frame(lk: Linkage, plan: Plan, phi) -> Placed:
-    conn = lk.connections[plan.pivot]
-    body_site, ground_site = _other_site(conn, GROUND)
-    return _placed_by_point(_local(lk, ground_site), _local(lk, body_site), phi)
+def branch(lk: Linkage, frames: dict, step: Dyad):
+    """The branch (+1 or -1, as ``sign`` of the dyad's closed form) that ``frames`` (every
+    body of the dyad and its parents placed) are on; +1 for a PRP dyad, which has one."""
+    u, v = step.first, step.second
+    outer, middle, other = (lk.connections[j] for j in step.joints)
+    p1 = _site_world(lk, frames, _sides(outer, u)[1])
+    if step.kind == "PRP":
+        return 1.0
+    if step.kind == "RPR":
+        d = cos_sin(add(frames[u].angle, middle.direction))
+        value = vdot(d, vsub(_site_world(lk, frames, _sides(other, v)[1]), p1))
+    else:
+        b = _site_world(lk, frames, _sides(middle, u)[0])
+        if step.kind == "RRR":
+            value = vcross(vsub(_site_world(lk, frames, _sides(other, v)[1]), p1), vsub(b, p1))
+        else:
+            _, _, d = _slide_line(lk, frames, other, v, local_point(lk, _sides(middle, v)[0]))
+            value = vdot(d, vsub(b, p1))
+    return stop_gradient(where(value >= 0.0, 1.0, -1.0))
+
+
+def middle_point(lk: Linkage, frames: dict, step: Dyad) -> tuple:
+    """Where a dyad's middle joint is (its first body's point), m, a pair."""
+    return _site_world(lk, frames, _sides(lk.connections[step.middle], step.first)[0])
+
+
+def joint_branch(lk: Linkage, step: Dyad, sign):
+    """The branch a joint's ``branch`` setting names, as seen from the dyad's own sign
+    (the two agree but where a RRR dyad's first body holds the middle joint's pin)."""
+    if step.kind == "RRR" and lk.connections[step.middle].pin.body == step.first:
+        return -sign
+    return sign
 
 
 def _guess_point(lk: Linkage, body: str, local) -> tuple | None:
@@ -174,247 +221,208 @@ def _guess_point(lk: Linkage, body: str, local) -> tuple | None:
     return None if guess is None else Placed.at((guess.x, guess.y), guess.angle).point(local)
 
 
-def _dyad_chain(lk: Linkage, plan: Plan, phi, signs=None):
-    """Frames ([`Placed`][jaxcrank.physics.forward.Placed]) after the dyads (and the
-    discriminants); ``signs`` None: choose each dyad's branch by the bodies' guesses
-    (returns the chosen signs). ``phi`` a number, an array (traced or NumPy, any shape)
-    or a [`Jet`][jaxcrank.physics.safemath.Jet]."""
+def _chosen_sign(lk: Linkage, frames: dict, step: Dyad):
+    """The branch of a dyad of the ideal mechanism: its middle joint's ``branch``, else the
+    one whose middle joint lies nearer the bodies' guesses, else +1."""
+    named = lk.connections[step.middle].branch
+    if named is not None:
+        return joint_branch(lk, step, _SIGNS[named])
+    m_u, m_v = _sides(lk.connections[step.middle], step.first)
+    target = _guess_point(lk, step.first, local_point(lk, m_u))
+    if target is None:
+        target = _guess_point(lk, step.second, local_point(lk, m_v))
+    if target is None or step.kind == "PRP":
+        return 1.0
+    plus, _ = _dyad(lk, frames, step, 1.0)
+    minus, _ = _dyad(lk, frames, step, -1.0)
+    gap_plus = vsub(plus[step.first].point(local_point(lk, m_u)), target)
+    gap_minus = vsub(minus[step.first].point(local_point(lk, m_u)), target)
+    return stop_gradient(where(vdot(gap_plus, gap_plus) <= vdot(gap_minus, gap_minus), 1.0, -1.0))
+
+
+def _driven_frame(lk: Linkage, plan: Plan, phi) -> Placed:
+    body_site, ground_site = _sides(lk.connections[plan.pivot], plan.driven)
+    return _placed_by_point(local_point(lk, ground_site), local_point(lk, body_site), phi)
+
+
+def _walk(lk: Linkage, plan: Plan, phi, signs, guesses):
+    """(frames, discriminants, signs) of the ideal mechanism at ``phi``; ``signs`` None:
+    each dyad's branch chosen on the way ([`_chosen_sign`][])."""
     frames = {GROUND: GROUND_FRAME, plan.driven: _driven_frame(lk, plan, phi)}
     discs, chosen = [], []
-    for i, step in enumerate(plan.steps):
-        if signs is not None:
-            sign = signs[i]
-        else:
-            middle = lk.connections[step.middle]
-            m_u = _other_site(middle, step.second)[0]
-            m_v = _other_site(middle, step.first)[0]
-            target = _guess_point(lk, step.first, _local(lk, m_u))
-            if target is None:
-                target = _guess_point(lk, step.second, _local(lk, m_v))
-            if target is None:
-                sign = 1.0
-            else:
-                plus, _ = _dyad(lk, frames, step, 1.0)
-                minus, _ = _dyad(lk, frames, step, -1.0)
-                gap_plus = vsub(plus[step.first].point(_local(lk, m_u)), target)
-                gap_minus = vsub(minus[step.first].point(_local(lk, m_u)), target)
-                nearer = vdot(gap_plus, gap_plus) <= vdot(gap_minus, gap_minus)
-                sign = stop_gradient(where(nearer, 1.0, -1.0))
-            chosen.append(sign)
+    dyads = None if signs is None else iter(signs)
+    groups = iter(guesses)
+    for step in plan.steps:
+        if isinstance(step, Group):
+            value = phi.value if hasattr(phi, "value") else phi
+            frames = group_frames(lk, step, frames, guess_at(next(groups), lk.driver.initial_angle, value))
+            continue
+        sign = _chosen_sign(lk, frames, step) if dyads is None else next(dyads)
+        chosen.append(sign)
         frames, disc = _dyad(lk, frames, step, sign)
         discs.append(disc)
-    return frames, discs, chosen
+    return frames, discs, tuple(chosen)
 
 
-def branch_signs(lk: Linkage, plan: Plan) -> tuple:
-    """Each dyad's branch (+1 or -1), chosen at the driver's initial angle (numbers
-    where the linkage's values are)."""
-    if not plan.steps:
+def ideal_frames(lk: Linkage, plan: Plan, phi, signs, guesses=()) -> dict:
+    """The ideal mechanism's frames ([`Placed`][jaxcrank.physics.forward.Placed], and the
+    ground's) at the driver angle ``phi`` (rad: a number, an array of any shape, traced or
+    NumPy, or a [`Jet`][jaxcrank.physics.safemath.Jet]).
+
+    Args:
+        lk: the linkage.
+        plan: its assembly plan.
+        phi: the driver's angle, rad.
+        signs: each dyad's branch, in the order of ``plan.dyads``
+            ([`branch_signs`][jaxcrank.physics.closure.branch_signs]).
+        guesses: per group of the plan, its poses over a turn
+            ([`group_guesses`][jaxcrank.physics.assembly.group_guesses]): the warm starts.
+    """
+    return _walk(lk, plan, phi, signs, guesses)[0]
+
+
+def discriminants(lk: Linkage, plan: Plan, phi, signs, guesses=()) -> list:
+    """Each dyad's discriminant at ``phi`` (rad): negative where its links cannot reach."""
+    return _walk(lk, plan, phi, signs, guesses)[1]
+
+
+def branch_signs(lk: Linkage, plan: Plan, guesses=()) -> tuple:
+    """Each dyad's branch (+1 or -1) of the ideal mechanism, in the order of ``plan.dyads``,
+    chosen at the driver's initial angle: the middle joint's ``branch``, else the one nearer
+    the bodies' guesses, else +1 (numbers where the linkage's values are)."""
+    if not plan.dyads:
         return ()
-    if all(lk.bodies[b].guess is None for st in plan.steps for b in (st.first, st.second)):
-        return (1.0,) * len(plan.steps)
-    return tuple(_dyad_chain(lk, plan, lk.driver.initial_angle)[2])
+    if all(lk.connections[st.middle].branch is None for st in plan.dyads) and all(
+        lk.bodies[b].guess is None for st in plan.dyads for b in st.bodies
+    ):
+        return (1.0,) * len(plan.dyads)
+    return _walk(lk, plan, lk.driver.initial_angle, None, guesses)[2]
 
 
-def ideal_frames(lk: Linkage, plan: Plan, phi, signs: tuple | None = None) -> dict[str, Placed]:
-    """The ideal mechanism's body frames ([`Placed`][jaxcrank.physics.forward.Placed], and the ground's) at the
-    driver angle ``phi`` (rad: a number, an array or a [`Jet`][jaxcrank.physics.safemath.Jet]), with the dyads'
-    branches ``signs`` (default [`branch_signs`][jaxcrank.physics.closure.branch_signs]); bodies no dyad reaches
-    by the loop-closure Newton solve (not for a Jet)."""
-    signs = branch_signs(lk, plan) if signs is None else signs
-    frames, _, _ = _dyad_chain(lk, plan, phi, signs)
-    if plan.rest:
-        known_poses = {b: f.pose() for b, f in frames.items() if b != GROUND}
-        x = _closed(lk, plan, jnp.asarray(phi, dtype=float), known_poses)
-        for i, body in enumerate(plan.rest):
-            frames[body] = Placed.at((x[3 * i], x[3 * i + 1]), x[3 * i + 2])
-    return frames
+# --------------------------------------------------------------------------- groups
 
 
-# --------------------------------------------------------------------------- Newton
+def _frames_with(frames: dict, bodies, x) -> dict:
+    out = dict(frames)
+    for i, body in enumerate(bodies):
+        out[body] = Placed.at((x[3 * i], x[3 * i + 1]), x[3 * i + 2])
+    return out
 
 
-def _frames_of(known: dict, plan: Plan, x) -> dict:
-    frames = {b: Placed.at((p[0], p[1]), p[2]) for b, p in known.items()}
-    frames[GROUND] = GROUND_FRAME
-    for i, body in enumerate(plan.rest):
-        frames[body] = Placed.at((x[3 * i], x[3 * i + 1]), x[3 * i + 2])
-    return frames
-
-
-def _rest_residual(lk, plan, known, x):
-    frames = _frames_of(known, plan, x)
+def residuals(lk: Linkage, frames: dict, joints) -> list:
+    """Each ideal joint's two closure equations at ``frames`` (m and rad): zero where the
+    joint holds ([`Revolute.residual`][jaxcrank.physics.linkage.Revolute.residual],
+    [`Prismatic.residual`][jaxcrank.physics.linkage.Prismatic.residual])."""
     out = []
-    for j in plan.constraints:
+    for j in joints:
         conn = lk.connections[j]
-        if isinstance(conn, Prismatic):
-            g = _site_world(lk, frames, conn.guide)
-            s = _site_world(lk, frames, conn.slider)
-            guide_angle = frames[conn.guide.body].angle
-            out += [
-                vcross(cos_sin(guide_angle + conn.direction), vsub(s, g)),
-                frames[conn.slider.body].angle - guide_angle - conn.angle,
-            ]
-        else:
-            out += list(vsub(_site_world(lk, frames, conn.hole), _site_world(lk, frames, conn.pin)))
-    return jnp.stack([jnp.asarray(v, dtype=float) for v in out])
+        a, b = conn.sites()
+        out += list(conn.residual(frames[a.body], frames[b.body], local_point(lk, a), local_point(lk, b)))
+    return out
 
 
-def _newton(lk, plan, known, x, iterations):
-    for _ in range(iterations):
-        r = _rest_residual(lk, plan, known, x)
-        jac = jax.jacfwd(lambda z: _rest_residual(lk, plan, known, z))(x)
-        x = x - solve_dense(jac, r)
-    return x
+def _parent_poses(frames: dict, step) -> jax.Array:
+    parents = [b for b in step.parents if b != GROUND]
+    return jnp.stack([jnp.asarray(v, dtype=float) for b in parents for v in (*frames[b].origin, frames[b].angle)])
 
 
-def _rest_guess(lk: Linkage, plan: Plan) -> Array:
-    missing = [b for b in plan.rest if lk.bodies[b].guess is None]
-    if missing:
-        raise ParameterError(
-            f"bodies {', '.join(missing)} are not placed by a dyad: give each a guess pose (x, y, angle) "
-            "at the driver's initial angle, for the loop-closure solve to start from"
-        )
-    return jnp.concatenate([lk.bodies[b].guess.vector() for b in plan.rest])
+def group_frames(lk: Linkage, step: Group, frames: dict, guess) -> dict:
+    """``frames`` with the bodies of the group ``step`` placed by Newton's method from
+    ``guess`` (their poses (x, y, angle) flattened), in a loop of at most `ITERATIONS`
+    that stops once a step is below `TOLERANCE`; derivatives by the implicit function
+    theorem. A group that does not close gives NaN poses."""
+    parents = [b for b in step.parents if b != GROUND]
+    p = _parent_poses(frames, step) if parents else jnp.zeros(0)
 
-
-def _poses(frames: dict) -> dict:
-    return {b: f.pose() for b, f in frames.items() if b != GROUND}
-
-
-def _closed(lk: Linkage, plan: Plan, phi, known: dict) -> Array:
-    """Poses of the bodies the dyads do not reach, by Newton's method, with exact
-    derivatives by the implicit function theorem; ``known``: the other bodies' poses
-    (x, y, angle) arrays by name."""
+    def residual(lk_, p_, x):
+        fr = {GROUND: GROUND_FRAME}
+        for i, b in enumerate(parents):
+            fr[b] = Placed.at((p_[3 * i], p_[3 * i + 1]), p_[3 * i + 2])
+        fr = _frames_with(fr, step.bodies, x)
+        return jnp.stack([jnp.asarray(v, dtype=float) for v in residuals(lk_, fr, step.joints)])
 
     @jax.custom_jvp
-    def solve(lk_, phi_, known_):
-        phi0 = lk_.driver.initial_angle
-        signs = branch_signs(lk_, plan)
-        x = jax.lax.stop_gradient(_rest_guess(lk_, plan))
-        start, _, _ = _dyad_chain(lk_, plan, phi0, signs)
-        x = _newton(lk_, plan, jax.lax.stop_gradient(_poses(start)), x, 2 * ITERATIONS)
+    def solve(lk_, p_):
+        def cond(carry):
+            i, _, size = carry
+            return (i < ITERATIONS) & (size > TOLERANCE)
 
-        def step(i, x):
-            a = phi0 + (phi_ - phi0) * (i + 1) / CONTINUATION_STEPS
-            kn, _, _ = _dyad_chain(lk_, plan, a, signs)
-            return _newton(lk_, plan, _poses(kn), x, ITERATIONS)
+        def body(carry):
+            i, x, _ = carry
+            dx = solve_dense(jax.jacfwd(lambda z: residual(lk_, p_, z))(x), residual(lk_, p_, x))
+            return i + 1, x - dx, jnp.max(jnp.abs(dx))
 
-        x = jax.lax.fori_loop(0, CONTINUATION_STEPS, step, x)
-        return jax.lax.stop_gradient(_newton(lk_, plan, known_, x, ITERATIONS))
+        x0 = jax.lax.stop_gradient(jnp.asarray(guess, dtype=float))
+        _, x, size = jax.lax.while_loop(cond, body, (0, x0, jnp.asarray(jnp.inf)))
+        return jax.lax.stop_gradient(jnp.where(size <= TOLERANCE * 1e3, x, jnp.nan))
 
     @solve.defjvp
     def solve_jvp(primals, tangents):
-        lk_, phi_, known_ = primals
-        x = solve(lk_, phi_, known_)
-        jac = jax.jacfwd(lambda z: _rest_residual(lk_, plan, known_, z))(x)
-        _, dr = jax.jvp(lambda lk2, k: _rest_residual(lk2, plan, k, x), (lk_, known_), (tangents[0], tangents[2]))
+        lk_, p_ = primals
+        x = solve(lk_, p_)
+        jac = jax.jacfwd(lambda z: residual(lk_, p_, z))(x)
+        _, dr = jax.jvp(lambda a, b: residual(a, b, x), primals, tangents)
         return x, -solve_dense(jac, dr)
 
-    return solve(lk, phi, known)
+    return _frames_with(frames, step.bodies, solve(lk, p))
 
 
-# --------------------------------------------------------------------------- public
+def guess_at(table, phi0, phi):
+    """The row of a group's guess table ([`group_guesses`][jaxcrank.physics.assembly.group_guesses])
+    nearest the driver angle ``phi`` (rad), stop-gradient."""
+    table = jnp.asarray(table)
+    samples = table.shape[0]
+    turns = (jax.lax.stop_gradient(jnp.asarray(phi, dtype=float)) - phi0) / (2.0 * math.pi)
+    index = jnp.round(turns * samples).astype(int) % samples
+    return jax.lax.stop_gradient(table[index])
 
 
-def ideal_poses(mech: AbstractMechanism, phi: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
-    """Frame poses (x, y in m; angle in rad) of every body of the ideal mechanism at the
-    driver's angle ``phi`` (rad), in sorted body order (the order of every per-body
-    array)."""
-    lk = mech.linkage()
-    sk = Skeleton.of(lk)
-    frames = ideal_frames(lk, plan_of(sk), jnp.asarray(phi, dtype=float))
-    return jnp.stack([frames[b].pose() for b in tree_of(sk).bodies])
+# --------------------------------------------------------------------------- closures in the dynamics
 
 
-def newton_poses(mech: AbstractMechanism, phi: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
-    """The same poses as [`ideal_poses`][jaxcrank.physics.closure.ideal_poses], every body placed by the
-    loop-closure Newton solve alone (no dyads): the reference the closed forms are tested
-    against. Every body needs a ``guess``."""
-    lk = mech.linkage()
-    sk = Skeleton.of(lk)
-    plan = plan_of(sk)
-    bare = Plan(
-        plan.driven,
-        plan.pivot,
-        (),
-        tuple(b for b in sk.bodies if b != plan.driven),
-        tuple(j for j in sorted(lk.connections) if j != plan.pivot),
-    )
-    phi = jnp.asarray(phi, dtype=float)
-    poses = {plan.driven: _driven_frame(lk, bare, phi).pose()}
-    x = _closed(lk, bare, phi, poses)
-    for i, body in enumerate(bare.rest):
-        poses[body] = x[3 * i : 3 * i + 3]
-    return jnp.stack([poses[b] for b in sk.bodies])
+def closed_states(lk: Linkage, step, states: dict, sign=1.0, guess=None) -> dict:
+    """The [`BodyState`][jaxcrank.physics.forward.BodyState]s of the bodies a closure step
+    places (a dyad on the branch ``sign``, or a group by its root find from ``guess``),
+    from the states of the bodies it hangs from: their poses by the closure, and the
+    velocities, bias accelerations and Jacobian columns by forward-mode derivatives of it
+    (``J p'``, ``J p'' + p'^T H p'`` and ``J`` times the parents' columns)."""
+    parents = [b for b in step.parents if b != GROUND]
 
+    def poses(p):
+        frames = {GROUND: GROUND_FRAME}
+        for i, b in enumerate(parents):
+            frames[b] = Placed.at((p[3 * i], p[3 * i + 1]), p[3 * i + 2])
+        out = _dyad(lk, frames, step, sign)[0] if isinstance(step, Dyad) else group_frames(lk, step, frames, guess)
+        return jnp.concatenate([out[b].pose() for b in step.bodies])
 
-def assembly_discriminants(mech: AbstractMechanism, phi: Float[ArrayLike, ""]) -> Float[Array, " dyads"]:
-    """The discriminant of each dyad's intersection at ``phi`` (rad): negative where the
-    dyad's links cannot reach (the linkage cannot be assembled there)."""
-    lk = mech.linkage()
-    plan = plan_of(Skeleton.of(lk))
-    _, discs, _ = _dyad_chain(lk, plan, jnp.asarray(phi, dtype=float), branch_signs(lk, plan))
-    return jnp.stack([jnp.asarray(d, dtype=float) for d in discs]) if discs else jnp.zeros(0)
+    def flat(values):
+        return jnp.stack([jnp.asarray(v, dtype=float) for v in values]) if values else jnp.zeros(0)
 
-
-def check_assembly(lk: Linkage, samples: int = 360) -> None:
-    """Raise a [`ParameterError`][jaxcrank.physics.params.ParameterError] when the linkage cannot be assembled at
-    its driver's initial angle, or (for a prescribed driver) locks before a full turn.
-    Does nothing while any parameter is traced.
-
-    Raises:
-        ParameterError: naming the dyad's joints and the angle.
-    """
-    leaves = jax.tree_util.tree_leaves(lk)
-    if any(_concrete(leaf) is None for leaf in leaves):
-        return
-    values = tuple(float(np.asarray(leaf)) if np.ndim(leaf) == 0 else tuple(np.ravel(leaf)) for leaf in leaves)
-    _check_assembly_cached(lk, Skeleton.of(lk), values, samples)
-
-
-_CHECKED: dict = {}
-
-
-def _check_assembly_cached(lk: Linkage, sk: Skeleton, values: tuple, samples: int) -> None:
-    key = (sk, jax.tree_util.tree_structure(lk), values, samples)
-    if key in _CHECKED:
-        return
-    _check_assembly(lk, sk, samples)
-    if len(_CHECKED) > 1024:
-        _CHECKED.clear()
-    _CHECKED[key] = True
-
-
-def _host_number(leaf):
-    value = np.asarray(leaf, dtype=float)
-    return float(value) if value.ndim == 0 else value
-
-
-def _check_assembly(lk: Linkage, sk: Skeleton, samples: int) -> None:
-    plan = plan_of(sk)
-    if not plan.steps:
-        return
-    lk = jax.tree_util.tree_map(_host_number, lk)  # numbers: the dyads evaluate in NumPy, nothing is compiled
-    batch = max((np.ndim(leaf) for leaf in jax.tree_util.tree_leaves(lk)), default=0)
-    phi0 = float(lk.driver.initial_angle)
-    phis = phi0 + 2.0 * np.pi * np.arange(samples if lk.driver.prescribed else 1) / samples
-    _, discs, _ = _dyad_chain(lk, plan, phis.reshape((-1,) + (1,) * batch), branch_signs(lk, plan))
-    shape = np.broadcast_shapes((phis.size,) + (1,) * batch, *(np.shape(d) for d in discs))
-    table = np.stack([np.broadcast_to(np.asarray(d, dtype=float), shape) for d in discs], axis=1)
-    ok = np.all(table >= 0.0, axis=tuple(range(2, table.ndim)))  # (angles, dyads)
-    for step, d in zip(plan.steps, ok[0]):
-        if not d:
-            raise ParameterError(
-                f"the linkage cannot be assembled at its start angle {np.degrees(phi0):g} deg: the links of "
-                f"joints {step.outer}, {step.middle}, {step.other} cannot reach each other (check the lengths)"
-            )
-    bad = np.argwhere(~ok)
-    if bad.size:
-        i, k = bad[0]
-        step = plan.steps[k]
-        raise ParameterError(
-            f"the linkage locks at driver angle {np.degrees(phis[i]):.1f} deg: the links of joints "
-            f"{step.outer}, {step.middle}, {step.other} cannot reach each other there, so the driven body "
-            f"{lk.driver.body!r} cannot make a full turn (check the lengths)"
+    st = [states[b] for b in parents]
+    p = flat([v for s in st for v in (*s.frame.origin, s.frame.angle)])
+    pd = flat([v for s in st for v in (*s.velocity, s.angular_velocity)])
+    pdd = flat([v for s in st for v in (*s.acceleration, s.angular_acceleration)])
+    (value, rate), (_, curvature) = jax.jvp(lambda x: jax.jvp(poses, (x,), (pd,)), (p,), (pd,))
+    jac = jax.jacfwd(poses)(p)
+    acc = jac @ pdd + curvature
+    keys = sorted({k for s in st for k in (*s.position_jacobian, *s.angle_jacobian)})
+    columns = {}
+    for k in keys:
+        entries = []
+        for s in st:
+            px, py = s.position_jacobian.get(k, (0.0, 0.0))
+            entries += [px, py, s.angle_jacobian.get(k, 0.0)]
+        columns[k] = jac @ flat(entries)
+    out = {}
+    for i, b in enumerate(step.bodies):
+        x, y, angle = (3 * i, 3 * i + 1, 3 * i + 2)
+        out[b] = BodyState(
+            Placed.at((value[x], value[y]), value[angle]),
+            (rate[x], rate[y]),
+            rate[angle],
+            (acc[x], acc[y]),
+            acc[angle],
+            {k: (c[x], c[y]) for k, c in columns.items()},
+            {k: c[angle] for k, c in columns.items()},
         )
+    return out

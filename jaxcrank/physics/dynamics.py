@@ -26,13 +26,16 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .compiled import Model, as_model
 from .fusion import compute_once
 from .joints import JointForces
-from .kinematics import Motion, tree_joint_motion, tree_motion
-from .linkage import GROUND, AbstractMechanism, Linkage
+from .kinematics import Motion, joint_motion, motion
+from .linkage import GROUND, AbstractMechanism
 from .safemath import add, ldl_solve, mul, neg, sub, total, vcross, vsub
-from .state import structure, tree_law_slices, tree_state_scales
+from .state import scales
 from .topology import Tree
+
+Mechanism = AbstractMechanism | Model
 
 
 class Dynamics(NamedTuple):
@@ -53,18 +56,18 @@ def _stack(values) -> Array:
     return jnp.stack([jnp.asarray(v, dtype=float) for v in values]) if len(values) else jnp.zeros(0)
 
 
-def tree_masses(lk: Linkage, tree: Tree) -> list:
+def masses(model: Model) -> list:
     """Masses and inertias of Q's entries, (m, m, J) per body, as scalars; kg, kg m^2."""
     out = []
-    for b in tree.bodies:
-        body = lk.bodies[b]
+    for b in model.tree.bodies:
+        body = model.linkage.bodies[b]
         out += [body.mass, body.mass, body.inertia]
     return out
 
 
-def mass_vector(mech: AbstractMechanism) -> Float[Array, " 3bodies"]:
+def mass_vector(model: Mechanism) -> Float[Array, " 3bodies"]:
     """Masses and inertias of Q's entries, (m, m, J) per body; kg, kg m^2."""
-    return _stack(tree_masses(*structure(mech)))
+    return _stack(masses(as_model(model)))
 
 
 @functools.lru_cache(maxsize=256)
@@ -85,76 +88,70 @@ def _add_wrench(applied: list, tree: Tree, q, body: str, force: tuple, point: tu
     applied[3 * i + 2] = total([applied[3 * i + 2], vcross(arm, force), moment])
 
 
-def tree_gravity(lk: Linkage, tree: Tree) -> list:
-    """Generalized gravity forces on Q, per entry (N, N, N m per body)."""
+def gravity_forces(model: Mechanism) -> list:
+    """Generalized gravity forces on Q, per entry (N, N, N m per body), as scalars."""
+    model = as_model(model)
     out = []
-    for b in tree.bodies:
-        out += [0.0, neg(mul(lk.bodies[b].mass, lk.gravity)), 0.0]
+    for b in model.tree.bodies:
+        out += [0.0, neg(mul(model.linkage.bodies[b].mass, model.linkage.gravity)), 0.0]
     return out
 
 
-def gravity_forces(mech: AbstractMechanism) -> list:
-    """Generalized gravity forces on Q, per entry (N, N, N m per body)."""
-    return tree_gravity(*structure(mech))
-
-
-def tree_joint_forces(lk: Linkage, tree: Tree, q, qd, law_state, rots=None) -> dict[str, JointForces]:
-    """[`joint_forces`][jaxcrank.physics.dynamics.joint_forces] for Q and dQ/dt as sequences of scalars
-    (``rots``: the bodies' rotations by name, when known)."""
-    slices = tree_law_slices(lk, tree)
-    n2 = 2 * tree.n
+def joint_forces(model: Mechanism, q, qd, law_state, rots=None) -> dict[str, JointForces]:
+    """Every cut joint's [`JointForces`][jaxcrank.physics.joints.JointForces] (by name) for Q, dQ/dt (arrays
+    or sequences of scalars) and the law states (SI, the state's law entries); ``rots``:
+    the bodies' rotations by name, when known."""
+    model = as_model(model)
+    slices = model.structure.law_slices
+    n2 = 2 * model.tree.n
     out = {}
-    for j in tree.cut:
-        kin, _ = tree_joint_motion(lk, tree, j, q, qd, rots=rots)
+    for j in model.tree.cut:
+        kin, _ = joint_motion(model, j, q, qd, rots=rots)
         sl = slices[j]
-        out[j] = lk.joints[j].forces(kin, law_state[sl.start - n2 : sl.stop - n2])
+        out[j] = model.linkage.joints[j].forces(kin, law_state[sl.start - n2 : sl.stop - n2])
     return out
-
-
-def joint_forces(mech: AbstractMechanism, q, qd, law_state) -> dict[str, JointForces]:
-    """Every cut joint's [`JointForces`][jaxcrank.physics.joints.JointForces] (by name) for Q, dQ/dt and the law
-    states (SI, the state's law entries)."""
-    return tree_joint_forces(*structure(mech), q, qd, law_state)
 
 
 def _pair(v) -> tuple:
     return v[0], v[1]
 
 
-def tree_applied(lk: Linkage, tree: Tree, q, forces: dict) -> list:
+def applied(model: Model, q, forces: dict) -> list:
     """[`applied_forces`][jaxcrank.physics.dynamics.applied_forces] as a list of scalars."""
-    applied = tree_gravity(lk, tree)
+    lk, tree = model.linkage, model.tree
+    out = gravity_forces(model)
     for j, f in forces.items():
         hole, pin = lk.connections[j].sites()
         force = _pair(f.force)
-        _add_wrench(applied, tree, q, pin.body, force, _pair(f.pin_point), f.pin_moment)
-        _add_wrench(applied, tree, q, hole.body, (neg(force[0]), neg(force[1])), _pair(f.hole_point), f.hole_moment)
+        _add_wrench(out, tree, q, pin.body, force, _pair(f.pin_point), f.pin_moment)
+        _add_wrench(out, tree, q, hole.body, (neg(force[0]), neg(force[1])), _pair(f.hole_point), f.hole_moment)
     if not lk.driver.prescribed:
         i = tree.bodies.index(lk.driver.body)
-        applied[3 * i + 2] = add(applied[3 * i + 2], lk.driver.torque)
-    return applied
+        out[3 * i + 2] = add(out[3 * i + 2], lk.driver.torque)
+    return out
 
 
-def applied_forces(mech: AbstractMechanism, q, qd, forces: dict) -> Array:
+def applied_forces(model: Mechanism, q, qd, forces: dict) -> Array:
     """Generalized forces on Q: gravity, a torque driver's torque, and each cut joint's wrench."""
-    return _stack(tree_applied(*structure(mech), q, forces))
+    return _stack(applied(as_model(model), q, forces))
 
 
-def driver_jacobian(mech: AbstractMechanism, s, t) -> Array:
+def driver_jacobian(model: Mechanism, s, t) -> Array:
     """dQ/dphi at fixed tree coordinates (zeros for a torque driver, whose angle is a coordinate)."""
-    lk, tree = structure(mech)
-    zero = [0.0] * tree.n
-    mo = tree_motion(lk, tree, [s[k] for k in range(tree.n)], zero, jnp.asarray(t, dtype=float))
-    return _stack([mo.driver_jacobian.get(r, 0.0) for r in range(3 * len(tree.bodies))])
+    model = as_model(model)
+    zero = [0.0] * model.tree.n
+    mo = motion(model, [s[k] for k in range(model.tree.n)], zero, jnp.asarray(t, dtype=float))
+    return _stack([mo.driver_jacobian.get(r, 0.0) for r in range(3 * len(model.tree.bodies))])
 
 
-def driver_speed(mech: AbstractMechanism, s, sd, t) -> Array:
+def driver_speed(model: Mechanism, s, sd, t) -> Array:
     """d(phi)/dt of the driver, rad/s."""
-    lk, tree = structure(mech)
+    model = as_model(model)
+    lk = model.linkage
     if lk.driver.prescribed:
         t = jnp.asarray(t, dtype=float)
         return jax.jvp(lk.driver.angle, (t,), (jnp.ones_like(t),))[1]
-    return jax.lax.stop_gradient(jnp.asarray(lk.driver.speed_scale, dtype=float)) + sd[tree.driver_coordinate]
+    return jax.lax.stop_gradient(jnp.asarray(lk.driver.speed_scale, dtype=float)) + sd[model.tree.driver_coordinate]
 
 
 class Terms(NamedTuple):
@@ -170,20 +167,21 @@ class Terms(NamedTuple):
     state_rate: Array
 
 
-def tree_dynamics(lk: Linkage, tree: Tree, t, y) -> Terms:
-    """The equations of motion of a linkage and its tree at time t (s) for the scaled state y."""
+def terms(model: Model, t, y) -> Terms:
+    """The equations of motion of a compiled model at time t (s) for the scaled state y."""
+    lk, tree = model.linkage, model.tree
     n = tree.n
-    scale = _stack(tree_state_scales(lk, tree))
+    scale = _stack(scales(model))
     phys = y * scale
     law_state = phys[2 * n : -2]
-    mo = tree_motion(lk, tree, [phys[k] for k in range(n)], [phys[n + k] for k in range(n)], t)
+    mo = motion(model, [phys[k] for k in range(n)], [phys[n + k] for k in range(n)], t)
     q, gamma = mo.q, mo.gamma
     rots = {b: st.frame.rot for b, st in mo.states.items()}
-    mass = tree_masses(lk, tree)
-    forces = tree_joint_forces(lk, tree, q, mo.qd, law_state, rots)
-    applied = tree_applied(lk, tree, q, forces)
+    mass = masses(model)
+    forces = joint_forces(model, q, mo.qd, law_state, rots)
+    applied_ = applied(model, q, forces)
 
-    residual = [sub(a, mul(m, g)) for a, m, g in zip(applied, mass, gamma)]
+    residual = [sub(a, mul(m, g)) for a, m, g in zip(applied_, mass, gamma)]
     by_column = {i: [(r, v) for (r, k), v in mo.jacobian.items() if k == i] for i in range(n)}
     pattern = _pattern(tree)
     lhs = [[0.0] * n for _ in range(n)]
@@ -191,51 +189,51 @@ def tree_dynamics(lk: Linkage, tree: Tree, t, y) -> Terms:
         for k in range(i, n):
             if pattern[i][k]:
                 col_k = dict(by_column[k])
-                terms = [mul(mul(v, mass[r]), col_k[r]) for r, v in by_column[i] if r in col_k]
-                lhs[i][k] = lhs[k][i] = total(terms)
+                products = [mul(mul(v, mass[r]), col_k[r]) for r, v in by_column[i] if r in col_k]
+                lhs[i][k] = lhs[k][i] = total(products)
     rhs = [total([mul(v, residual[r]) for r, v in by_column[i]]) for i in range(n)]
     sdd = ldl_solve(lambda i, k: lhs[i][k], rhs, pattern)
     qdd = list(gamma)
     for (r, k), v in mo.jacobian.items():
         qdd[r] = add(qdd[r], mul(v, sdd[k]))
 
-    slices = tree_law_slices(lk, tree)
+    slices = model.structure.law_slices
     law_rates = []
     for j in tree.cut:
-        kin, acc = tree_joint_motion(lk, tree, j, q, mo.qd, qdd, rots)
+        kin, acc = joint_motion(model, j, q, mo.qd, qdd, rots)
         law_rates.append(lk.joints[j].state_rate(kin, acc, phys[slices[j]], forces[j]))
 
     if lk.driver.prescribed:
-        moment = total([mul(v, sub(mul(mass[r], qdd[r]), applied[r])) for r, v in mo.driver_jacobian.items()])
+        moment = total([mul(v, sub(mul(mass[r], qdd[r]), applied_[r])) for r, v in mo.driver_jacobian.items()])
     else:
         moment = lk.driver.torque
     dissipation = total([f.dissipation for f in forces.values()])
     rate = jnp.concatenate(
         [phys[n : 2 * n], _stack(sdd), *law_rates, _stack([mul(moment, mo.driver_speed), dissipation])]
     )
-    return Terms(mo, qdd, applied, forces, moment, rate / scale)
+    return Terms(mo, qdd, applied_, forces, moment, rate / scale)
 
 
-def dynamics(mech: AbstractMechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Dynamics:
+def dynamics(model: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Dynamics:
     """The equations of motion at time t (s) for scaled state y: only what dy/dt
     needs ([`jaxcrank.physics.frame.evaluate`][] adds the output-only quantities)."""
-    lk, tree = structure(mech)
-    e = tree_dynamics(lk, tree, jnp.asarray(t, dtype=float), y)
+    model = as_model(model)
+    e = terms(model, jnp.asarray(t, dtype=float), y)
     mo = e.motion
     moment = jnp.asarray(e.driving_moment, dtype=float)
     return Dynamics(_stack(mo.q), _stack(mo.qd), _stack(e.qdd), e.forces, moment, _stack(e.applied), e.state_rate)
 
 
 @jax.jit
-def vector_field(
-    t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"], mech: AbstractMechanism
-) -> Float[Array, " state"]:
+def vector_field(t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"], model: Model) -> Float[Array, " state"]:
     """dy/dt of the scaled state ``y`` (shape (state_size,)) at time ``t`` (s), for
-    diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=mech``.
+    diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=model`` (a compiled
+    [`Model`][jaxcrank.physics.compiled.Model]).
 
     Jitted, so a solve holds one call of the field per solver stage, which JAX
     linearizes and transposes once (shorter compiles of gradients); XLA inlines it,
     computing each value the equations share once ([`jaxcrank.physics.fusion`][]).
     """
-    lk, tree = structure(mech)
-    return compute_once(lambda t_, y_: tree_dynamics(lk, tree, t_, y_).state_rate, jnp.asarray(t, dtype=float), y)
+    model = as_model(model)
+    _ = model.linkage  # written out here, outside the fused function: its numbers are inputs there
+    return compute_once(lambda t_, y_: terms(model, t_, y_).state_rate, jnp.asarray(t, dtype=float), y)

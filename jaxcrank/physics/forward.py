@@ -24,7 +24,7 @@ from jaxtyping import Array
 
 from .linkage import GROUND, Linkage
 from .safemath import add, cos_sin, known_zero, mul, sub, vadd, vperp, vscale, vsub, vturn
-from .topology import Tree
+from .topology import Placement, Tree
 
 
 class BodyState(NamedTuple):
@@ -126,11 +126,13 @@ def _place(state_point, angle, rot, omega, alpha, jt, local) -> BodyState:
     )
 
 
-def forward(lk: Linkage, tree: Tree, q, qd, qdd, phi, phid, phidd) -> dict[str, BodyState]:
+def forward(lk: Linkage, tree: Tree, q, qd, qdd, phi, phid, phidd, closed=None) -> dict[str, BodyState]:
     """Every body's [`BodyState`][jaxcrank.physics.forward.BodyState] (and the ground's), for tree coordinates
     ``q`` (a sequence of scalars) with rates ``qd`` and known second rates ``qdd``, and
     the driver angle ``phi`` (rad) with its rates (used where the driver prescribes a
-    body's angle)."""
+    body's angle). ``closed(step, states)`` gives the states of the bodies a closure step
+    of the tree places ([`jaxcrank.physics.closure.closed_states`][]) from those placed
+    before it."""
     m = tree.n + 1
     out = {GROUND: GROUND_STATE}
 
@@ -140,7 +142,10 @@ def forward(lk: Linkage, tree: Tree, q, qd, qdd, phi, phid, phidd) -> dict[str, 
         k = own[0]
         return q[k], qd[k], qdd[k], {k: 1.0}
 
-    for p in tree.placements:
+    for p in tree.steps:
+        if not isinstance(p, Placement):
+            out.update(closed(p, out))
+            continue
         own = list(p.coordinates)
         if p.kind == "floating":  # its coordinates are its centre of mass and angle
             ix, iy = own[0], own[1]

@@ -15,14 +15,32 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .dynamics import tree_dynamics, tree_gravity, tree_masses
-from .forward import Centres, centres, forward
+from .compiled import Model, as_model
+from .dynamics import gravity_forces, masses, terms
+from .forward import Centres, centres, forward, local_point
 from .fusion import compute_once
-from .kinematics import driver_motion, ideal_jets
-from .linkage import BodyVector, Linkage
-from .safemath import Jet, add, cos_sin, div, mul, neg, safe_norm, sub, total, vadd, vdot, vturn
-from .state import structure, tree_state_scales
-from .topology import Tree
+from .kinematics import closure_residuals, closures, driver_motion, ideal_jets
+from .linkage import GROUND, AbstractMechanism, BodyVector
+from .safemath import (
+    Jet,
+    add,
+    cos_sin,
+    div,
+    mul,
+    neg,
+    safe_norm,
+    solve_dense,
+    sub,
+    total,
+    vadd,
+    vcross,
+    vdot,
+    vturn,
+)
+from .state import scales
+from .topology import Placement
+
+Mechanism = AbstractMechanism | Model
 
 
 class Frame(NamedTuple):
@@ -49,6 +67,9 @@ class Frame(NamedTuple):
             motion, N m.
         transmission_angle: rad (zero when the mechanism defines none).
         ideal_transmission_angle: rad.
+        closure_residual: per ideal joint (in the order of ``structure.ideal_joints``),
+            how far apart its two sides are, m: zero but for rounding where the loops of
+            ideal joints close.
         kinetic_energy: J.
         potential_energy: J.
         contact_energy: J, stored in the joint laws.
@@ -74,6 +95,7 @@ class Frame(NamedTuple):
     ideal_driving_moment: jax.Array
     transmission_angle: jax.Array
     ideal_transmission_angle: jax.Array
+    closure_residual: jax.Array
     kinetic_energy: jax.Array
     potential_energy: jax.Array
     contact_energy: jax.Array
@@ -82,43 +104,38 @@ class Frame(NamedTuple):
     state_rate: jax.Array
 
 
-def _direction(lk: Linkage, tree: Tree, q, v: BodyVector) -> tuple:
-    angle = q[3 * tree.bodies.index(v.body) + 2]
+def _direction(model: Model, q, v: BodyVector) -> tuple:
+    angle = q[3 * model.tree.bodies.index(v.body) + 2]
     if v.end is None:
         return cos_sin(add(angle, v.angle))
-    pts = lk.bodies[v.body].points
+    pts = model.linkage.bodies[v.body].points
     return vturn(cos_sin(angle), pts[v.end].minus(pts[v.start]))
 
 
-def tree_transmission_angle(lk: Linkage, tree: Tree, q) -> Array:
-    """[`transmission_angle`][jaxcrank.physics.frame.transmission_angle] for Q as a sequence of scalars."""
-    spec = lk.outputs.transmission
+def transmission_angle(model: Mechanism, q: Float[ArrayLike, " 3bodies"]) -> Float[Array, ""]:
+    """The transmission angle of centre-of-mass poses Q (flattened; an array or a sequence
+    of scalars), rad: the angle between the mechanism's two transmission directions
+    ([`Outputs`][jaxcrank.physics.linkage.Outputs]); zero when it defines none."""
+    model = as_model(model)
+    spec = model.linkage.outputs.transmission
     if spec is None:
         return jnp.zeros(())
-    u, v = (_direction(lk, tree, q, side) for side in spec)
+    u, v = (_direction(model, q, side) for side in spec)
     cosine = vdot(u, v) / (safe_norm(_stack(u)) * safe_norm(_stack(v)))
     return jnp.arccos(jnp.clip(cosine, -1.0, 1.0))
 
 
-def transmission_angle(mech, q: Float[ArrayLike, " 3bodies"]) -> Float[Array, ""]:
-    """The transmission angle of centre-of-mass poses Q (flattened), rad: the angle
-    between the mechanism's two transmission directions ([`Outputs`][jaxcrank.physics.linkage.Outputs]);
-    zero when it defines none."""
-    lk, tree = structure(mech)
-    return tree_transmission_angle(lk, tree, q)
-
-
-def ideal_kinematics(mech, phi, phi_dot, phi_ddot) -> tuple[Array, Array, Array]:
+def ideal_kinematics(model: Mechanism, phi, phi_dot, phi_ddot) -> tuple[Array, Array, Array]:
     """The ideal mechanism's centre-of-mass poses Q (flattened) and their first two time
     derivatives, for the driver at angle phi (rad) moving at phi_dot (rad/s) with
     acceleration phi_ddot (rad/s^2)."""
-    lk, tree = structure(mech)
+    model = as_model(model)
     phi = jnp.asarray(phi, dtype=float)
-    c = _ideal_centres(lk, tree, ideal_jets(lk, tree, Jet(phi, 1.0, 0.0)), phi, phi_dot, phi_ddot, in_time=False)
+    c = _ideal_centres(model, ideal_jets(model, Jet(phi, 1.0, 0.0)), phi, phi_dot, phi_ddot, in_time=False)
     return _stack(c.q), _stack(c.qd), _stack(c.qdd)
 
 
-def _ideal_centres(lk: Linkage, tree: Tree, jets: list, phi, phi_dot, phi_ddot, in_time: bool) -> Centres:
+def _ideal_centres(model: Model, jets: list, phi, phi_dot, phi_ddot, in_time: bool) -> Centres:
     """The ideal bodies' centres from the ideal coordinates' jets (in time, or in the driver
     angle to be scaled by the driver's rates)."""
     if in_time:
@@ -127,45 +144,96 @@ def _ideal_centres(lk: Linkage, tree: Tree, jets: list, phi, phi_dot, phi_ddot, 
         q = [j.value for j in jets]
         qd = [mul(j.rate, phi_dot) for j in jets]
         qdd = [add(mul(j.second, mul(phi_dot, phi_dot)), mul(j.rate, phi_ddot)) for j in jets]
-    return centres(lk, tree, forward(lk, tree, q, qd, qdd, phi, phi_dot, phi_ddot))
+    lk, tree = model.linkage, model.tree
+    return centres(lk, tree, forward(lk, tree, q, qd, qdd, phi, phi_dot, phi_ddot, closures(model, phi)))
 
 
-def _reactions(tree: Tree, mass, qdd, applied) -> dict[str, tuple]:
+def _closure_loads(model: Model, step, frames: dict, carried: dict, moment: dict) -> dict[str, tuple]:
+    """The reactions of a closure step's joints (force on each joint's pin or slider side,
+    a pair, N), from the loads its bodies carry (force and moment about the origin);
+    adds what the joints pass to the bodies it hangs from to theirs."""
+    lk = model.linkage
+    bodies = list(step.bodies)
+    rows = {b: i for i, b in enumerate(bodies)}
+    columns, passed = [], []  # per unknown: {row: (fx, fy, m)} on the step's bodies
+    for j in step.joints:
+        conn = lk.connections[j]
+        first, second = conn.sites()  # hole or guide side, pin or slider side
+        point = frames[second.body].point(local_point(lk, second))
+        for unit in ((1.0, 0.0), (0.0, 1.0)):
+            force, pure = conn.load(unit, frames[first.body].angle)
+            wrench = (force[0], force[1], add(vcross(point, force), pure))
+            entry = {}
+            for site, sign in ((second, 1.0), (first, -1.0)):
+                if site.body in rows:
+                    entry[rows[site.body]] = tuple(mul(sign, w) for w in wrench)
+            columns.append(entry)
+            passed.append([(site.body, sign, wrench) for site, sign in ((second, 1.0), (first, -1.0))])
+    size = 3 * len(bodies)
+    a = [[0.0] * len(columns) for _ in range(size)]
+    for c, entry in enumerate(columns):
+        for r, w in entry.items():
+            for k in range(3):
+                a[3 * r + k][c] = w[k]
+    b = [v for body in bodies for v in (*carried[body], moment[body])]
+    x = solve_dense(jnp.stack([_stack(row) for row in a]), _stack(b))
+    out = {}
+    for i, j in enumerate(step.joints):
+        conn = lk.connections[j]
+        out[j] = conn.load((x[2 * i], x[2 * i + 1]), frames[conn.sites()[0].body].angle)[0]
+    for c, sides in enumerate(passed):
+        for body, sign, wrench in sides:
+            if body in rows or body == GROUND:
+                continue
+            load = [mul(mul(-sign, w), x[c]) for w in wrench]  # a parent carries what it passes on
+            carried[body] = vadd(carried[body], (load[0], load[1]))
+            moment[body] = add(moment[body], load[2])
+    return out
+
+
+def _reactions(model: Model, frames: dict, q, mass, qdd, applied) -> dict[str, tuple]:
+    """Force each ideal joint transmits to its pin (or slider) side, N, a pair per joint
+    name: in a tree step the sum of ``m a - F`` over the bodies it carries; in a closure
+    step from the Newton-Euler equations of its bodies."""
+    tree = model.tree
     net = [sub(mul(m, a), f) for m, a, f in zip(mass, qdd, applied)]
     carried = {b: (net[3 * i], net[3 * i + 1]) for i, b in enumerate(tree.bodies)}
+    moment = {}
+    if tree.closures:  # moments about the origin: m a - F's moment, r x (m a - F)
+        for i, b in enumerate(tree.bodies):
+            moment[b] = add(net[3 * i + 2], vcross((q[3 * i], q[3 * i + 1]), carried[b]))
     out = {}
-    for p in reversed(tree.placements):
+    for p in reversed(tree.steps):
+        if not isinstance(p, Placement):
+            out.update(_closure_loads(model, p, frames, carried, moment))
+            continue
         if p.joint is None:
             continue
         out[p.joint] = carried[p.body]
         if p.parent in carried:
             carried[p.parent] = vadd(carried[p.parent], carried[p.body])
+            if moment:
+                moment[p.parent] = add(moment[p.parent], moment[p.body])
     return out
-
-
-def tree_reactions(mech, q, qdd, applied) -> dict[str, Array]:
-    """Force each ideal tree joint transmits to the body below it, N, (2,) per joint name:
-    the sum of ``m a - F`` over the bodies it carries."""
-    lk, tree = structure(mech)
-    return {j: _stack(f) for j, f in _reactions(tree, tree_masses(lk, tree), qdd, applied).items()}
 
 
 def _stack(values) -> Array:
     return jnp.stack([jnp.asarray(v, dtype=float) for v in values]) if len(values) else jnp.zeros(0)
 
 
-def _frame(lk: Linkage, tree: Tree, t, y) -> Frame:
-    e = tree_dynamics(lk, tree, t, y)
+def _frame(model: Model, t, y) -> Frame:
+    lk, tree = model.linkage, model.tree
+    e = terms(model, t, y)
     mo = e.motion
     q, qd, qdd = mo.q, mo.qd, e.qdd
-    mass = tree_masses(lk, tree)
-    gravity = tree_gravity(lk, tree)
+    mass = masses(model)
+    gravity = gravity_forces(model)
     phi, phi_dot = mo.driver_angle, mo.driver_speed
     if lk.driver.prescribed:
-        phi_ddot = driver_motion(lk, t)[2]
+        phi_ddot = driver_motion(model, t)[2]
     else:
         phi_ddot = qdd[3 * tree.bodies.index(lk.driver.body) + 2]
-    ideal = _ideal_centres(lk, tree, mo.ideal, phi, phi_dot, phi_ddot, in_time=lk.driver.prescribed)
+    ideal = _ideal_centres(model, mo.ideal, phi, phi_dot, phi_ddot, in_time=lk.driver.prescribed)
     ideal_power = sub(
         total([mul(mul(m, a), v) for m, a, v in zip(mass, ideal.qdd, ideal.qd)]),
         total([mul(g, v) for g, v in zip(gravity, ideal.qd)]),
@@ -173,7 +241,8 @@ def _frame(lk: Linkage, tree: Tree, t, y) -> Frame:
     kinetic = mul(0.5, total([mul(m, mul(v, v)) for m, v in zip(mass, qd)]))
     potential = neg(total([mul(g, x) for g, x in zip(gravity, q)]))
 
-    reactions = _reactions(tree, mass, qdd, e.applied)
+    frames = {b: st.frame for b, st in mo.states.items()}
+    reactions = _reactions(model, frames, q, mass, qdd, e.applied)
     zero2, zero = jnp.zeros(2), jnp.zeros(())
     per = {k: [] for k in ("eccentricity", "penetration", "normal_force", "friction_force", "slip_speed")}
     for j in tree.joints:
@@ -193,7 +262,7 @@ def _frame(lk: Linkage, tree: Tree, t, y) -> Frame:
     stacked = {k: (jnp.stack(v) if v else jnp.zeros((0, 2) if k == "eccentricity" else 0)) for k, v in per.items()}
 
     nb = len(tree.bodies)
-    phys_works = y[-2:] * _stack(tree_state_scales(lk, tree)[-2:])
+    phys_works = y[-2:] * _stack(scales(model)[-2:])
     return Frame(
         t=t,
         driver_angle=jnp.asarray(phi, dtype=float),
@@ -206,8 +275,9 @@ def _frame(lk: Linkage, tree: Tree, t, y) -> Frame:
         **stacked,
         driving_moment=jnp.asarray(e.driving_moment, dtype=float),
         ideal_driving_moment=jnp.asarray(div(ideal_power, phi_dot), dtype=float),
-        transmission_angle=tree_transmission_angle(lk, tree, q),
-        ideal_transmission_angle=tree_transmission_angle(lk, tree, ideal.q),
+        transmission_angle=transmission_angle(model, q),
+        ideal_transmission_angle=transmission_angle(model, ideal.q),
+        closure_residual=closure_residuals(model, q),
         kinetic_energy=jnp.asarray(kinetic, dtype=float),
         potential_energy=jnp.asarray(potential, dtype=float),
         contact_energy=jnp.asarray(total([f.elastic_energy for f in e.forces.values()]), dtype=float),
@@ -217,9 +287,10 @@ def _frame(lk: Linkage, tree: Tree, t, y) -> Frame:
     )
 
 
-def evaluate(mech, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Frame:
+def evaluate(model: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Frame:
     """All physical quantities at time t (s) for scaled state y; also dy/dt."""
-    lk, tree = structure(mech)
+    model = as_model(model)
+    _ = model.linkage  # written out here, outside the fused function: its numbers are inputs there
     t = jnp.asarray(t, dtype=float)
     y = jnp.asarray(y, dtype=float)
-    return compute_once(lambda t_, y_: _frame(lk, tree, t_, y_), t, y)
+    return compute_once(lambda t_, y_: _frame(model, t_, y_), t, y)

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -153,6 +154,16 @@ class GuideClearance(AbstractJointLaw):
     memory: AbstractMemoryLaw = ForgettingMemory()
     slider_material: Material = Material()
     guide_material: Material = Material()
+
+    def with_clearance(self, clearance, joint: str | None = None) -> GuideClearance:
+        """This law with the gap ``clearance`` (m) on each side of the slider; ``joint``
+        names the joint in messages.
+
+        Raises:
+            ParameterError: a known clearance that is not positive and finite.
+        """
+        check_range("clearance" if joint is None else f"clearance_{joint}", clearance, low=0.0, unit="m")
+        return eqx.tree_at(lambda law: law.clearance, self, clearance)
 
     def __check_init__(self):
         for field in ("length", "height", "clearance", "corner_radius"):

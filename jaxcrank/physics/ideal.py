@@ -2,11 +2,11 @@
 driver: motion, transmission angle, joint reactions and driving moment by inverse
 dynamics, and the contact margin.
 
-Positions come from [`jaxcrank.physics.closure.ideal_poses`][] (dyads in closed form,
-Newton's method for the rest); velocities and accelerations are their exact time
+Positions come from [`jaxcrank.physics.kinematics.ideal_poses`][] (dyads in closed form,
+a root find for the rest); velocities and accelerations are their exact time
 derivatives by forward-mode autodiff. Per-body arrays are in sorted body order. All
-functions take a mechanism and a scalar time t (s); ``jax.vmap`` over t for
-trajectories.
+functions take a compiled model (or a mechanism) and a scalar time t (s); ``jax.vmap``
+over t for trajectories.
 """
 
 from __future__ import annotations
@@ -15,39 +15,41 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .closure import ideal_poses
+from .compiled import Model, as_model
 from .frame import transmission_angle as _transmission_angle
-from .kinematics import centre_poses
-from .linkage import GROUND, AbstractMechanism, Prismatic, world_point
-from .safemath import cross, perp, safe_norm, solve_dense
-from .state import structure
+from .kinematics import centre_poses, ideal_poses
+from .linkage import GROUND, AbstractMechanism, world_point
+from .safemath import cross, safe_norm, solve_dense
+
+Mechanism = AbstractMechanism | Model
 
 
-def _prescribed(mech: AbstractMechanism):
-    lk = mech.linkage()
-    if not lk.driver.prescribed:
+def _prescribed(mech: Mechanism):
+    driver = as_model(mech).linkage.driver
+    if not driver.prescribed:
         raise ValueError(
-            f"the ideal motion in time needs a prescribed driver; a {lk.driver.name!r} driver's angle is not known in "
-            "advance (evaluate the ideal mechanism at a driver angle: jaxcrank.physics.closure.ideal_poses)"
+            f"the ideal motion in time needs a prescribed driver; a {driver.name!r} driver's angle is not known in "
+            "advance (evaluate the ideal mechanism at a driver angle: jaxcrank.physics.kinematics.ideal_poses)"
         )
-    return lk.driver
+    return driver
 
 
-def driver_angle(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
+def driver_angle(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """The prescribed driver angle phi(t), rad."""
     return _prescribed(mech).angle(jnp.asarray(t, dtype=float))
 
 
-def positions(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
+def positions(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
     """Centre-of-mass poses (x [m], y [m], angle [rad]) of every body at time t."""
-    lk, tree = structure(mech)
-    return centre_poses(lk, tree, ideal_poses(mech, driver_angle(mech, t))).reshape(-1, 3)
+    model = as_model(mech)
+    return centre_poses(model, ideal_poses(model, driver_angle(model, t))).reshape(-1, 3)
 
 
 def kinematics(
-    mech: AbstractMechanism, t: Float[ArrayLike, ""]
+    mech: Mechanism, t: Float[ArrayLike, ""]
 ) -> tuple[Float[Array, "bodies 3"], Float[Array, "bodies 3"], Float[Array, "bodies 3"]]:
     """Ideal (Q, dQ/dt, d2Q/dt2) at time t, per body; units m, rad and their per-second rates."""
+    mech = as_model(mech)
     t = jnp.asarray(t, dtype=float)
 
     def vel(tt):
@@ -57,21 +59,21 @@ def kinematics(
     return q, qd, qdd
 
 
-def transmission_angle(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
+def transmission_angle(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """The ideal mechanism's transmission angle at time t, rad (zero when it defines none)."""
     return _transmission_angle(mech, jnp.ravel(positions(mech, t)))
 
 
-def body_index(mech: AbstractMechanism, body: str) -> int:
+def body_index(mech: Mechanism, body: str) -> int:
     """Position of ``body`` in the per-body arrays (sorted names)."""
-    return structure(mech)[1].bodies.index(body)
+    return as_model(mech).tree.bodies.index(body)
 
 
 def _local(lk, site):
     return (lk.ground if site.body == GROUND else lk.bodies[site.body].points)[site.point].vector()
 
 
-def joint_reactions(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> tuple[dict[str, Array], Array]:
+def joint_reactions(mech: Mechanism, t: Float[ArrayLike, ""]) -> tuple[dict[str, Array], Array]:
     """The ideal mechanism's joint loads at time t by inverse dynamics (Newton-Euler for
     every body; the loads of a one-degree-of-freedom linkage are determinate).
 
@@ -80,27 +82,22 @@ def joint_reactions(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> tuple[d
         prismatic joint) from its hole side (the guide), N, (2,) by joint name; and the
         driver's torque, N m.
     """
-    lk, tree = structure(mech)
-    driver = _prescribed(mech)
-    q, qd, qdd = kinematics(mech, t)
-    frames = ideal_poses(mech, driver.angle(jnp.asarray(t, dtype=float)))
+    model = as_model(mech)
+    lk, tree = model.linkage, model.tree
+    driver = _prescribed(model)
+    q, qd, qdd = kinematics(model, t)
+    frames = ideal_poses(model, driver.angle(jnp.asarray(t, dtype=float)))
     poses = {b: frames[i] for i, b in enumerate(tree.bodies)}
     poses[GROUND] = jnp.zeros(3)
     joints = tree.joints
 
     def unknowns(x):
         """(force on the pin side, moment on it) per joint, and the torque."""
-        out, k = {}, 0
-        for j in joints:
+        out = {}
+        for k, j in enumerate(joints):
             conn = lk.connections[j]
-            if isinstance(conn, Prismatic):
-                angle = poses[conn.guide.body][2] + conn.direction
-                normal = perp(jnp.stack([jnp.cos(angle), jnp.sin(angle)]))
-                out[j] = (x[k] * normal, x[k + 1])
-            else:
-                out[j] = (x[k : k + 2], jnp.zeros(()))
-            k += 2
-        return out, x[k]
+            out[j] = conn.load((x[2 * k], x[2 * k + 1]), poses[conn.sites()[0].body][2])
+        return out, x[2 * len(joints)]
 
     def residual(x):
         loads, torque = unknowns(x)
@@ -113,6 +110,7 @@ def joint_reactions(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> tuple[d
             for j in joints:
                 hole, pin = lk.connections[j].sites()
                 f, m = loads[j]
+                f = jnp.stack([jnp.asarray(v, dtype=float) for v in f])
                 for site, sign in ((pin, 1.0), (hole, -1.0)):
                     if site.body == b:
                         point = world_point(poses[b], _local(lk, site))
@@ -130,15 +128,15 @@ def joint_reactions(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> tuple[d
     a = jax.jacfwd(residual)(zero)
     x = solve_dense(a, -residual(zero))
     loads, torque = unknowns(x)
-    return {j: loads[j][0] for j in joints}, torque
+    return {j: jnp.stack([jnp.asarray(v, dtype=float) for v in loads[j][0]]) for j in joints}, torque
 
 
-def driving_moment(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
+def driving_moment(mech: Mechanism, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """The moment the driver needs to keep the ideal mechanism on its prescribed motion, N m."""
     return joint_reactions(mech, t)[1]
 
 
-def contact_margin(mech: AbstractMechanism, samples: int = 360, softness: float = 0.005) -> Float[Array, ""]:
+def contact_margin(mech: Mechanism, samples: int = 360, softness: float = 0.005) -> Float[Array, ""]:
     """How far the ideal mechanism's joint loads stay from zero over one revolution:
     ``min_j softmin_t |F_j(t)| / rms_t |F_j(t)|`` over the joints j with clearance (all
     joints where none has) ([`joint_reactions`][jaxcrank.physics.ideal.joint_reactions]), dimensionless, in [0, 1].
@@ -161,8 +159,8 @@ def contact_margin(mech: AbstractMechanism, samples: int = 360, softness: float 
     """
     if int(samples) < 8 or not softness > 0:
         raise ValueError(f"samples = {samples} must be >= 8 and softness = {softness} > 0")
-    _, tree = structure(mech)
-    joints = tree.cut or tree.joints
+    mech = as_model(mech)
+    joints = mech.tree.cut or mech.tree.joints
     ts = mech.period * jnp.arange(int(samples), dtype=float) / int(samples)
     forces = jax.vmap(lambda t: joint_reactions(mech, t)[0])(ts)
     margins = []

@@ -146,6 +146,18 @@ class AbstractJointLaw(eqx.Module):
         joints)."""
         raise NotImplementedError(f"the {self.name!r} law has no clearance")
 
+    def with_clearance(self, clearance, joint: str | None = None) -> AbstractJointLaw:
+        """This law with its clearance (``clearance``, m) set as the law sets it: the one
+        place a joint's clearance is changed (``clearance_<joint>`` of
+        [`jaxcrank.physics.parameters`][]). Traceable in ``clearance``; ``joint`` names the
+        joint in messages.
+
+        Raises:
+            ParameterError: for an ideal law (it has no clearance), or a known value
+                outside the law's range.
+        """
+        raise ParameterError(f"the {self.name!r} law has no clearance; give the joint a clearance law first")
+
     def forces(self, kin: JointKinematics, state: Float[Array, " k"]) -> JointForces:
         """The wrench the law applies at one instant, from its kinematics and state (SI)."""
         raise NotImplementedError(f"the {self.name!r} law applies no force")
@@ -179,6 +191,22 @@ class AbstractPinInHole(AbstractJointLaw):
     def clearance(self):
         """Radial clearance c = R_h - R_p, m."""
         return self.hole_radius - self.pin_radius
+
+    def with_clearance(self, clearance, joint: str | None = None) -> AbstractPinInHole:
+        """This law with radial clearance ``clearance`` (m): the pin shrinks, the hole stays.
+
+        Raises:
+            ParameterError: a known clearance outside (0, hole_radius).
+        """
+        value, hole = _concrete(clearance), _concrete(self.hole_radius)
+        if value is not None and hole is not None and not np.all((value > 0.0) & (value < hole)):
+            name = "clearance" if joint is None else f"clearance_{joint}"
+            hole_name = "hole_radius" if joint is None else f"joints.{joint}.hole_radius"
+            raise ParameterError(
+                f"{name} = {np.asarray(value).ravel()[0]:g} m is out of range (valid range: 0 < {name} < "
+                f"{hole_name} = {np.min(hole):g} m, so that pin_radius = hole_radius - clearance stays positive)"
+            )
+        return eqx.tree_at(lambda law: law.pin_radius, self, self.hole_radius - clearance)
 
     def state_names(self):
         return self.memory.state_names

@@ -3,10 +3,12 @@ their rates, and where each joint's two sides are.
 
 The tree ([`jaxcrank.physics.topology.Tree`][]) places every body from its generalized
 coordinates q and the driver's angle phi
-([`tree_poses`][jaxcrank.physics.kinematics.tree_poses]). The state holds s = q - q_ideal(phi), where
-q_ideal(phi) are the coordinates of the ideal mechanism
-([`jaxcrank.physics.closure.ideal_poses`][]); a torque driver's angle is a coordinate of
-its own, held as its deviation from the nominal angle phi_0 + omega t.
+([`poses`][jaxcrank.physics.kinematics.poses]); the bodies a loop of ideal joints slaves
+follow the bodies they hang from through the same closed forms (or root finds) the ideal
+mechanism uses ([`jaxcrank.physics.closure`][]), applied to the actual poses. The state
+holds s = q - q_ideal(phi), where q_ideal(phi) are the coordinates of the ideal mechanism
+([`ideal_poses`][jaxcrank.physics.kinematics.ideal_poses]); a torque driver's angle is a
+coordinate of its own, held as its deviation from the nominal angle phi_0 + omega t.
 [`coordinates`][jaxcrank.physics.kinematics.coordinates] gives the bodies' centre-of-mass poses Q = (x, y, angle)
 per body, their rates and ``gamma`` = d2Q/dt2 at zero s'': the ideal coordinates and
 their time derivatives in one Taylor pass through the dyads' closed forms
@@ -22,30 +24,65 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .closure import ideal_frames
-from .forward import Placed, centres, forward, local_point
+from . import assembly, closure
+from .compiled import Model, as_model
+from .forward import GROUND_FRAME, Placed, centres, forward, local_point
 from .joints import JointAccelerations, JointKinematics
-from .linkage import GROUND, AbstractMechanism, Linkage, Prismatic
+from .linkage import GROUND, AbstractMechanism
 from .safemath import Jet, add, cos_sin, mul, stop_gradient, sub, vadd, vdot, vperp, vscale, vsub, vturn
-from .state import structure, unpack
-from .topology import Skeleton, Tree, plan_of
+from .state import initial_state, state_scales, unpack
+from .topology import Dyad, Group, Plan
+
+Mechanism = AbstractMechanism | Model
 
 
 def _stack(values) -> Array:
     return jnp.stack([jnp.asarray(v, dtype=float) for v in values]) if len(values) else jnp.zeros(0)
 
 
-def tree_poses(lk: Linkage, tree: Tree, q: Float[ArrayLike, " n"], phi: Float[ArrayLike, ""]) -> dict[str, Array]:
+def ideal_frames(model: Model, phi) -> dict[str, Placed]:
+    """The ideal mechanism's body frames ([`Placed`][jaxcrank.physics.forward.Placed], and
+    the ground's) at the driver angle ``phi`` (rad: a number, an array or a
+    [`Jet`][jaxcrank.physics.safemath.Jet])."""
+    return closure.ideal_frames(model.linkage, model.plan, phi, model.signs, model.guesses)
+
+
+def closures(model: Model, phi):
+    """The function that places the bodies of the tree's closure steps
+    ([`jaxcrank.physics.closure.closed_states`][]) for [`jaxcrank.physics.forward.forward`][]:
+    each dyad on the branch of the ideal mechanism, each group from the ideal mechanism's
+    poses at the driver angle ``phi`` (rad)."""
+    tree = model.tree
+    signs = dict(zip([c for c in tree.closures if isinstance(c, Dyad)], model.tree_signs))
+    guess_frames = {}
+
+    def closed(step, states):
+        if isinstance(step, Dyad):
+            return closure.closed_states(model.linkage, step, states, sign=signs[step])
+        if not guess_frames:
+            value = phi.value if isinstance(phi, Jet) else phi
+            guess_frames.update(ideal_frames(model, stop_gradient(value)))
+        guess = jnp.concatenate([guess_frames[b].pose() for b in step.bodies])
+        return closure.closed_states(model.linkage, step, states, guess=guess)
+
+    return closed
+
+
+def poses(model: Model, q: Float[ArrayLike, " n"], phi: Float[ArrayLike, ""]) -> dict[str, Array]:
     """Frame pose (x, y, angle) of every body (and the ground) for absolute tree
     coordinates ``q`` and driver angle ``phi`` (rad)."""
+    tree = model.tree
     zero = [0.0] * tree.n
-    states = forward(lk, tree, [q[k] for k in range(tree.n)], zero, zero, phi, 0.0, 0.0)
+    states = forward(
+        model.linkage, tree, [q[k] for k in range(tree.n)], zero, zero, phi, 0.0, 0.0, closures(model, phi)
+    )
     return {b: st.frame.pose() for b, st in states.items()}
 
 
-def coordinates_of(lk: Linkage, tree: Tree, frames: dict[str, Placed]) -> list:
+def coordinates_of(model: Model, frames: dict[str, Placed]) -> list:
     """The tree coordinates q (a list of scalars) of body frames (inverse of
-    [`tree_poses`][jaxcrank.physics.kinematics.tree_poses])."""
+    [`poses`][jaxcrank.physics.kinematics.poses])."""
+    lk, tree = model.linkage, model.tree
     q = [None] * tree.n
     for p in tree.placements:
         own = list(p.coordinates)
@@ -57,7 +94,7 @@ def coordinates_of(lk: Linkage, tree: Tree, frames: dict[str, Placed]) -> list:
         elif p.kind == "revolute":
             if own:
                 q[own[0]] = frame.angle
-        else:
+        elif p.kind == "prismatic":
             conn = lk.connections[p.joint]
             guide = frames[conn.guide.body]
             d = cos_sin(add(guide.angle, conn.direction))
@@ -67,99 +104,123 @@ def coordinates_of(lk: Linkage, tree: Tree, frames: dict[str, Placed]) -> list:
     return q
 
 
-def tree_coordinates(lk: Linkage, tree: Tree, poses: dict[str, Array]) -> Array:
-    """The tree coordinates q of given body poses (inverse of
-    [`tree_poses`][jaxcrank.physics.kinematics.tree_poses])."""
-    frames = {b: Placed.at((p[0], p[1]), p[2]) for b, p in poses.items()}
-    return _stack(coordinates_of(lk, tree, frames))
-
-
-def driver_angle(mech: AbstractMechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> Float[Array, ""]:
+def driver_angle(model: Mechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> Float[Array, ""]:
     """The driver's angle phi, rad: prescribed at time t (s), or, for a torque driver,
     the nominal angle plus its deviation in ``s``."""
-    lk, tree = structure(mech)
+    model = as_model(model)
+    lk = model.linkage
     if lk.driver.prescribed:
         return lk.driver.angle(t)
     omega = jax.lax.stop_gradient(lk.driver.speed_scale)
-    return lk.driver.initial_angle + omega * t + s[tree.driver_coordinate]
+    return lk.driver.initial_angle + omega * t + s[model.tree.driver_coordinate]
 
 
-def ideal_coordinates(mech: AbstractMechanism, phi: Float[ArrayLike, ""]) -> Float[Array, " n"]:
+def ideal_poses(model: Mechanism, phi: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
+    """Frame poses (x, y in m; angle in rad) of every body of the ideal mechanism at the
+    driver's angle ``phi`` (rad), in sorted body order (the order of every per-body
+    array)."""
+    model = as_model(model)
+    frames = ideal_frames(model, jnp.asarray(phi, dtype=float))
+    return jnp.stack([frames[b].pose() for b in model.tree.bodies])
+
+
+def newton_poses(model: Mechanism, phi: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
+    """The same poses as [`ideal_poses`][jaxcrank.physics.kinematics.ideal_poses], every body
+    but the driven one placed together by one root find (no dyads), followed over the
+    turn from the bodies' ``guess`` poses: the reference the closed forms are tested
+    against. Every body needs a ``guess``."""
+    model = as_model(model)
+    lk, plan = model.linkage, model.plan
+    bodies = tuple(b for b in model.tree.bodies if b != plan.driven)
+    joints = tuple(j for j in model.tree.joints if j != plan.pivot)
+    group = Group(
+        bodies, joints, tuple(sorted({e for j in joints for e in model.structure.skeleton.ends(j)} - set(bodies)))
+    )
+    bare = Plan(plan.driven, plan.pivot, (group,))
+    frames = closure.ideal_frames(
+        lk, bare, jnp.asarray(phi, dtype=float), (), (assembly.group_guesses(lk, bare, group, ()),)
+    )
+    return jnp.stack([frames[b].pose() for b in model.tree.bodies])
+
+
+def ideal_coordinates(model: Mechanism, phi: Float[ArrayLike, ""]) -> Float[Array, " n"]:
     """Tree coordinates q_ideal of the ideal mechanism at driver angle phi (rad)."""
-    lk, tree = structure(mech)
-    return _stack(coordinates_of(lk, tree, ideal_frames(lk, plan_of(Skeleton.of(lk)), jnp.asarray(phi, dtype=float))))
+    model = as_model(model)
+    return _stack(coordinates_of(model, ideal_frames(model, jnp.asarray(phi, dtype=float))))
 
 
-def ideal_jets(lk: Linkage, tree: Tree, phi: Jet) -> list[Jet]:
+def ideal_jets(model: Model, phi: Jet) -> list[Jet]:
     """The ideal tree coordinates as [`Jet`][jaxcrank.physics.safemath.Jet]s along the driver angle's jet
     ``phi`` (its value and first two derivatives): the dyads' closed forms in one Taylor
-    pass; bodies placed by the loop-closure Newton solve by nested forward-mode autodiff."""
-    plan = plan_of(Skeleton.of(lk))
-    if not plan.rest:
-        return [Jet.of(v) for v in coordinates_of(lk, tree, ideal_frames(lk, plan, phi))]
+    pass; a plan with groups (root finds) by nested forward-mode autodiff."""
+    if not any(s.kind == "group" for s in model.plan.steps):
+        return [Jet.of(v) for v in coordinates_of(model, ideal_frames(model, phi))]
 
     def at(p):
-        return _stack(coordinates_of(lk, tree, ideal_frames(lk, plan, p)))
+        return _stack(coordinates_of(model, ideal_frames(model, p)))
 
     value = jnp.asarray(phi.value, dtype=float)
     one = jnp.ones_like(value)
     (q, dq), (_, d2q) = jax.jvp(lambda p: jax.jvp(at, (p,), (one,)), (value,), (one,))
     rate2 = mul(phi.rate, phi.rate)
-    return [Jet(q[k], mul(dq[k], phi.rate), add(mul(d2q[k], rate2), mul(dq[k], phi.second))) for k in range(tree.n)]
+    return [
+        Jet(q[k], mul(dq[k], phi.rate), add(mul(d2q[k], rate2), mul(dq[k], phi.second))) for k in range(model.tree.n)
+    ]
 
 
-def absolute_coordinates(
-    mech: AbstractMechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]
-) -> tuple[Array, Array]:
+def absolute_coordinates(model: Mechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> tuple[Array, Array]:
     """(q, phi): absolute tree coordinates and the driver's angle from the deviations s at time t."""
-    _, tree = structure(mech)
-    phi = driver_angle(mech, s, t)
-    q = ideal_coordinates(mech, phi) + s
-    if tree.driver_coordinate is not None:
-        q = q.at[tree.driver_coordinate].set(phi)
+    model = as_model(model)
+    phi = driver_angle(model, s, t)
+    q = ideal_coordinates(model, phi) + s
+    if model.tree.driver_coordinate is not None:
+        q = q.at[model.tree.driver_coordinate].set(phi)
     return q, phi
 
 
-def frame_poses(mech: AbstractMechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> Array:
+def frame_poses(model: Mechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> Array:
     """Frame poses (x, y, angle) of every body, sorted body order, shape (bodies, 3)."""
-    lk, tree = structure(mech)
-    q, phi = absolute_coordinates(mech, s, t)
-    poses = tree_poses(lk, tree, q, phi)
-    return jnp.stack([poses[b] for b in tree.bodies])
+    model = as_model(model)
+    q, phi = absolute_coordinates(model, s, t)
+    frames = poses(model, q, phi)
+    return jnp.stack([frames[b] for b in model.tree.bodies])
 
 
-def centre_poses(lk: Linkage, tree: Tree, frames: Float[ArrayLike, "bodies 3"]) -> Float[Array, " 3bodies"]:
-    """Centre-of-mass poses (x, y, angle) of every body, flattened to (3 bodies,)."""
+def centre_poses(model: Mechanism, frames: Float[ArrayLike, "bodies 3"]) -> Float[Array, " 3bodies"]:
+    """Centre-of-mass poses (x, y, angle) of every body, flattened to (3 bodies,), from
+    their frame poses (bodies, 3)."""
+    model = as_model(model)
+    lk = model.linkage
     out = []
-    for i, b in enumerate(tree.bodies):
+    for i, b in enumerate(model.tree.bodies):
         com = Placed.at((frames[i][0], frames[i][1]), frames[i][2]).point(lk.bodies[b].centre_of_mass.pair())
         out += [com[0], com[1], frames[i][2]]
     return _stack(out)
 
 
-def positions(mech: AbstractMechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> Array:
+def positions(model: Mechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> Array:
     """Q: centre-of-mass poses (x [m], y [m], angle [rad]) of every body, flattened, (3 bodies,)."""
-    lk, tree = structure(mech)
-    return centre_poses(lk, tree, frame_poses(mech, s, t))
+    model = as_model(model)
+    return centre_poses(model, frame_poses(model, s, t))
 
 
-def driver_motion(mech: AbstractMechanism, t: Float[ArrayLike, ""]) -> tuple[Array, Array, Array]:
+def driver_motion(model: Mechanism, t: Float[ArrayLike, ""]) -> tuple[Array, Array, Array]:
     """A prescribed driver's angle, rad, and its first two time derivatives at t (s)."""
-    lk = mech.linkage()
+    driver = as_model(model).linkage.driver
     t = jnp.asarray(t, dtype=float)
     one = jnp.ones_like(t)
 
     def rate(tt):
-        return jax.jvp(lk.driver.angle, (tt,), (one,))
+        return jax.jvp(driver.angle, (tt,), (one,))
 
     (phi, phid), (_, phidd) = jax.jvp(rate, (t,), (one,))
     return phi, phid, phidd
 
 
-def ideal_derivatives(mech: AbstractMechanism, phi: Float[ArrayLike, ""]) -> tuple[Array, Array, Array]:
+def ideal_derivatives(model: Mechanism, phi: Float[ArrayLike, ""]) -> tuple[Array, Array, Array]:
     """q_ideal(phi) and its first two derivatives in phi (per rad)."""
-    lk, tree = structure(mech)
-    jets = ideal_jets(lk, tree, Jet(jnp.asarray(phi, dtype=float), 1.0, 0.0))
+    model = as_model(model)
+    jets = ideal_jets(model, Jet(jnp.asarray(phi, dtype=float), 1.0, 0.0))
     return tuple(_stack([getattr(j, k) for j in jets]) for k in ("value", "rate", "second"))
 
 
@@ -183,12 +244,23 @@ class Motion(NamedTuple):
     ideal: list
 
 
-def tree_motion(lk: Linkage, tree: Tree, s, sd, t) -> Motion:
-    """[`Motion`][jaxcrank.physics.kinematics.Motion] from the deviations s, s' (sequences of scalars) at time t (s)."""
+def motion(model: Mechanism, s, sd, t) -> Motion:
+    """The bodies' [`Motion`][jaxcrank.physics.kinematics.Motion] from the deviations s, s'
+    (sequences of scalars, or arrays) at time t (s).
+
+    The ideal coordinates and their time derivatives come from the dyads' closed forms in
+    one Taylor pass ([`ideal_jets`][jaxcrank.physics.kinematics.ideal_jets]); the tree is walked once by
+    [`jaxcrank.physics.forward.forward`][] with the rigid-body formulas, giving positions,
+    velocities, bias accelerations and the Jacobian columns together.
+    """
+    model = as_model(model)
+    lk, tree = model.linkage, model.tree
     n, dc = tree.n, tree.driver_coordinate
+    s, sd = [s[k] for k in range(n)], [sd[k] for k in range(n)]
+    t = jnp.asarray(t, dtype=float)
     if lk.driver.prescribed:
-        phi, phid, phidd = driver_motion(lk, t)
-        ideal = ideal_jets(lk, tree, Jet(phi, phid, phidd))
+        phi, phid, phidd = driver_motion(model, t)
+        ideal = ideal_jets(model, Jet(phi, phid, phidd))
         q = [add(j.value, s[k]) for k, j in enumerate(ideal)]
         qd = [add(j.rate, sd[k]) for k, j in enumerate(ideal)]
         qdd = [j.second for j in ideal]
@@ -196,12 +268,12 @@ def tree_motion(lk: Linkage, tree: Tree, s, sd, t) -> Motion:
         omega = stop_gradient(lk.driver.speed_scale)
         phi = add(lk.driver.initial_angle, mul(omega, t)) + s[dc]
         phid, phidd = add(omega, sd[dc]), 0.0
-        ideal = ideal_jets(lk, tree, Jet(phi, 1.0, 0.0))  # derivatives in phi
+        ideal = ideal_jets(model, Jet(phi, 1.0, 0.0))  # derivatives in phi
         q = [add(j.value, s[k]) for k, j in enumerate(ideal)]
         qd = [add(mul(j.rate, phid), sd[k]) for k, j in enumerate(ideal)]
         qdd = [mul(j.second, mul(phid, phid)) for j in ideal]
         q[dc], qd[dc], qdd[dc] = phi, phid, 0.0
-    states = forward(lk, tree, q, qd, qdd, phi, phid, phidd)
+    states = forward(lk, tree, q, qd, qdd, phi, phid, phidd, closures(model, phi))
     c = centres(lk, tree, states)
     jac = {rk: v for rk, v in c.jacobian.items() if rk[1] < n}
     jac_phi = {r: v for (r, k), v in c.jacobian.items() if k == n}
@@ -213,37 +285,23 @@ def tree_motion(lk: Linkage, tree: Tree, s, sd, t) -> Motion:
     return Motion(c.q, c.qd, c.qdd, jac, jac_phi, states, phi, phid, ideal)
 
 
-def motion(
-    mech: AbstractMechanism, s: Float[ArrayLike, " n"], sd: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]
-) -> Motion:
-    """The bodies' [`Motion`][jaxcrank.physics.kinematics.Motion] from the deviations s, s' at time t (s).
-
-    The ideal coordinates and their time derivatives come from the dyads' closed forms in
-    one Taylor pass ([`ideal_jets`][jaxcrank.physics.kinematics.ideal_jets]); the tree is walked once by
-    [`jaxcrank.physics.forward.forward`][] with the rigid-body formulas, giving positions,
-    velocities, bias accelerations and the Jacobian columns together.
-    """
-    lk, tree = structure(mech)
-    return tree_motion(lk, tree, [s[k] for k in range(tree.n)], [sd[k] for k in range(tree.n)], jnp.asarray(t, float))
-
-
 def coordinates(
-    mech: AbstractMechanism, s: Float[ArrayLike, " n"], sd: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]
+    model: Mechanism, s: Float[ArrayLike, " n"], sd: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]
 ) -> tuple[Array, Array, Array]:
     """Q, dQ/dt and ``gamma`` = d2Q/dt2 at zero s'' (the velocity-product terms), from
     the deviations s, s' at time t; Q as in [`positions`][jaxcrank.physics.kinematics.positions]."""
-    m = motion(mech, s, sd, t)
+    m = motion(model, s, sd, t)
     return _stack(m.q), _stack(m.qd), _stack(m.gamma)
 
 
-def _body_point(lk: Linkage, tree: Tree, body: str, local, q, qd, qdd=None, rots=None):
+def _body_point(model: Model, body: str, local, q, qd, qdd=None, rots=None):
     """World position, velocity (and acceleration) of a body point (local frame
     coordinates), as pairs, from the centre-of-mass poses Q (``rots``: the bodies'
     rotations, when known)."""
     if body == GROUND:
         return tuple(local), (0.0, 0.0), (0.0, 0.0), 0.0, 0.0, 0.0
-    i = tree.bodies.index(body)
-    com = lk.bodies[body].centre_of_mass
+    i = model.tree.bodies.index(body)
+    com = model.linkage.bodies[body].centre_of_mass
     angle, omega = q[3 * i + 2], qd[3 * i + 2]
     rot = rots[body] if rots is not None else cos_sin(angle)
     r = vturn(rot, (sub(local[0], com.x), sub(local[1], com.y)))
@@ -256,22 +314,23 @@ def _body_point(lk: Linkage, tree: Tree, body: str, local, q, qd, qdd=None, rots
     return pos, vel, acc, angle, omega, alpha
 
 
-def tree_joint_motion(
-    lk: Linkage, tree: Tree, joint: str, q, qd, qdd=None, rots=None
+def joint_motion(
+    model: Mechanism, joint: str, q, qd, qdd=None, rots=None
 ) -> tuple[JointKinematics, JointAccelerations | None]:
-    """[`joint_motion`][jaxcrank.physics.kinematics.joint_motion] for Q, its rates (and accelerations) as
-    sequences of scalars; ``rots``: the bodies' rotations (cos, sin) by name, when known."""
+    """Where the two sides of ``joint`` are and how they move, from the centre-of-mass
+    poses Q, their rates (and accelerations), as in [`coordinates`][jaxcrank.physics.kinematics.coordinates]
+    (arrays or sequences of scalars); ``rots``: the bodies' rotations (cos, sin) by name,
+    when known."""
+    model = as_model(model)
+    lk = model.linkage
     conn = lk.connections[joint]
     hole_site, pin_site = conn.sites()
-    extra_hole = extra_pin = 0.0
-    if isinstance(conn, Prismatic):
-        extra_hole = conn.direction
-        extra_pin = conn.direction - conn.angle
+    extra_hole, extra_pin = conn.side_angles()
     hp, hv, ha, h_angle, h_omega, h_alpha = _body_point(
-        lk, tree, hole_site.body, local_point(lk, hole_site), q, qd, qdd, rots
+        model, hole_site.body, local_point(lk, hole_site), q, qd, qdd, rots
     )
     pp, pv, pa, p_angle, p_omega, p_alpha = _body_point(
-        lk, tree, pin_site.body, local_point(lk, pin_site), q, qd, qdd, rots
+        model, pin_site.body, local_point(lk, pin_site), q, qd, qdd, rots
     )
     kin = JointKinematics(
         _stack(hp),
@@ -291,26 +350,36 @@ def tree_joint_motion(
     return kin, acc
 
 
-def joint_motion(
-    mech: AbstractMechanism, joint: str, q: Array, qd: Array, qdd: Array | None = None
-) -> tuple[JointKinematics, JointAccelerations | None]:
-    """Where the two sides of ``joint`` are and how they move, from the centre-of-mass
-    poses Q, their rates (and accelerations), as in [`coordinates`][jaxcrank.physics.kinematics.coordinates]."""
-    lk, tree = structure(mech)
-    return tree_joint_motion(lk, tree, joint, q, qd, qdd)
+def closure_residuals(model: Mechanism, q) -> Array:
+    """Each ideal joint's closure residual for centre-of-mass poses Q (flattened), m: the
+    distance between its two points (a revolute joint), or of the slider point from the
+    guide's line (a prismatic joint); zero where the loops close exactly. In the order
+    of ``structure.ideal_joints``."""
+    model = as_model(model)
+    lk, tree = model.linkage, model.tree
+    frames = {GROUND: GROUND_FRAME}
+    for i, b in enumerate(tree.bodies):
+        rot = cos_sin(q[3 * i + 2])
+        com = vturn(rot, lk.bodies[b].centre_of_mass.pair())
+        frames[b] = Placed(vsub((q[3 * i], q[3 * i + 1]), com), q[3 * i + 2], rot)
+    out = []
+    for j in model.structure.ideal_joints:
+        conn = lk.connections[j]
+        out.append(conn.gap(closure.residuals(lk, frames, [j])))
+    return jnp.stack(out) if out else jnp.zeros(0)
 
 
 def joint_eccentricities(
-    mech: AbstractMechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]
+    model: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]
 ) -> tuple[Float[Array, "joints 2"], Float[Array, "joints 2"]]:
     """Eccentricities d = pin point - hole point, m, and their rates, m/s, of every cut
     (clearance) joint in sorted order, shape (joints, 2) each."""
-    _, tree = structure(mech)
-    state = unpack(mech, y)
-    q, qd, _ = coordinates(mech, state.deviation, state.deviation_rate, t)
+    model = as_model(model)
+    state = unpack(model, y)
+    q, qd, _ = coordinates(model, state.deviation, state.deviation_rate, t)
     d, dd = [], []
-    for j in tree.cut:
-        kin, _ = joint_motion(mech, j, q, qd)
+    for j in model.tree.cut:
+        kin, _ = joint_motion(model, j, q, qd)
         d.append(kin.pin_position - kin.hole_position)
         dd.append(kin.pin_velocity - kin.hole_velocity)
     if not d:
@@ -319,7 +388,7 @@ def joint_eccentricities(
 
 
 def state_from_eccentricities(
-    mech: AbstractMechanism,
+    model: Mechanism,
     t: Float[ArrayLike, ""],
     d: Float[ArrayLike, "joints 2"],
     d_rate: Float[ArrayLike, "joints 2"],
@@ -337,9 +406,8 @@ def state_from_eccentricities(
         ValueError: when the cut joints' eccentricities do not determine the coordinates
             (a count that is not two per cut joint).
     """
-    from .state import initial_state, state_scales
-
-    _, tree = structure(mech)
+    model = as_model(model)
+    tree = model.tree
     n = tree.n
     d = jnp.asarray(d, dtype=float)
     if 2 * d.shape[0] != n or tree.driver_coordinate is not None:
@@ -348,33 +416,24 @@ def state_from_eccentricities(
             "(state_from_eccentricities needs two coordinates per clearance joint and a prescribed driver)"
         )
     t = jnp.asarray(t, dtype=float)
-    scale = state_scales(mech)
-    y = initial_state(mech) if guess is None else jnp.asarray(guess, dtype=float)
+    scale = state_scales(model)
+    y = initial_state(model) if guess is None else jnp.asarray(guess, dtype=float)
 
-    def ecc(s_):
-        q = positions(mech, s_, t)
+    def ecc(s_, tt):
+        q = positions(model, s_, tt)
         out = []
         for j in tree.cut:
-            kin, _ = joint_motion(mech, j, q, jnp.zeros_like(q))
+            kin, _ = joint_motion(model, j, q, jnp.zeros_like(q))
             out.append(kin.pin_position - kin.hole_position)
         return jnp.concatenate(out)
 
     s = y[:n] * scale[:n]
     target = jnp.ravel(d)
     for _ in range(iterations):
-        jac = jax.jacfwd(ecc)(s)
-        s = s - jnp.linalg.solve(jac, ecc(s) - target)
+        jac = jax.jacfwd(lambda s_: ecc(s_, t))(s)
+        s = s - jnp.linalg.solve(jac, ecc(s, t) - target)
     # rates: d(ecc)/dt = J s' + d(ecc)/dt at fixed s
-    jac = jax.jacfwd(ecc)(s)
-    _, explicit = jax.jvp(lambda tt: _ecc_at(mech, tree, s, tt), (t,), (jnp.ones_like(t),))
+    jac = jax.jacfwd(lambda s_: ecc(s_, t))(s)
+    _, explicit = jax.jvp(lambda tt: ecc(s, tt), (t,), (jnp.ones_like(t),))
     sd = jnp.linalg.solve(jac, jnp.ravel(d_rate) - explicit)
     return jnp.concatenate([s, sd, jnp.asarray(rest, dtype=float)]) / scale
-
-
-def _ecc_at(mech, tree, s, t):
-    q = positions(mech, s, t)
-    out = []
-    for j in tree.cut:
-        kin, _ = joint_motion(mech, j, q, jnp.zeros_like(q))
-        out.append(kin.pin_position - kin.hole_position)
-    return jnp.concatenate(out)

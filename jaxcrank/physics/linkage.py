@@ -7,8 +7,8 @@ and the driver.
   [`Revolute`][jaxcrank.physics.linkage.Revolute] (a pin in a hole) or a
   [`Prismatic`][jaxcrank.physics.linkage.Prismatic] (a slider on a guide). What the joint does is its law
   ([`jaxcrank.physics.joints`][]): ideal, or a force element with clearance.
-- The driver ([`ConstantSpeed`][jaxcrank.physics.linkage.ConstantSpeed],
-  [`SpeedProfile`][jaxcrank.physics.linkage.SpeedProfile], [`Torque`][jaxcrank.physics.linkage.Torque]) turns one
+- The driver ([`ConstantSpeed`][jaxcrank.physics.drivers.ConstantSpeed],
+  [`SpeedProfile`][jaxcrank.physics.drivers.SpeedProfile], [`Torque`][jaxcrank.physics.drivers.Torque]) turns one
   body that is jointed to the ground.
 - [`Outputs`][jaxcrank.physics.linkage.Outputs] say which deviations from the ideal motion and which
   transmission angle the mechanism reports as metrics.
@@ -24,17 +24,16 @@ from __future__ import annotations
 
 import abc
 import dataclasses
-import math
 from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .drivers import AbstractDriver
 from .joints import AbstractJointLaw
-from .params import ParameterError, _concrete, check_range
-from .safemath import rotation, turn
+from .params import ParameterError, check_range
+from .safemath import add, atan2, cos_sin, mul, neg, rotation, sub, turn, vcross, vsub
 
 #: the name of the ground in joint and driver descriptions
 GROUND = "ground"
@@ -109,20 +108,60 @@ class Site:
         return f"{self.body}.{self.point}"
 
 
+#: the words a joint's ``branch`` takes (see [`Revolute`][jaxcrank.physics.linkage.Revolute])
+BRANCHES = ("+", "-", "positive", "negative")
+
+
+def _check_branch(joint) -> None:
+    if joint.branch is not None and joint.branch not in BRANCHES:
+        raise ParameterError(f"branch = {joint.branch!r} must be one of {', '.join(repr(b) for b in BRANCHES)}")
+
+
 class Revolute(eqx.Module):
     """A revolute joint: the pin at ``pin`` turns in the hole at ``hole``.
 
     Attributes:
         hole: the body and point of the hole (the bearing); ``"ground"`` for a fixed pivot.
         pin: the body and point of the pin (the journal).
+        branch: where the ideal mechanism's two links meet at this joint (the middle joint
+            of a dyad), which of the two ways they can be assembled: ``"+"`` (or
+            ``"positive"``) where the turn at this joint from the hole body's other joint to
+            the pin body's other joint is counter-clockwise; where one of the two bodies
+            slides on a line instead, ``"+"`` where this joint lies ahead of the other
+            body's pivot along the line's direction; ``"-"`` the other way. ``None``: the
+            assembly nearest the bodies' ``guess`` poses, or ``"+"`` without them.
     """
 
     kind: ClassVar[str] = "revolute"
     hole: Site = eqx.field(static=True)
     pin: Site = eqx.field(static=True)
+    branch: str | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        _check_branch(self)
 
     def sites(self) -> tuple[Site, Site]:
         return self.hole, self.pin
+
+    def residual(self, hole_frame, pin_frame, hole_local, pin_local) -> tuple:
+        """The joint's two closure equations for frames of its two bodies (objects with
+        ``point(local)`` and ``angle``) and its points in them: hole point minus pin point,
+        m; zero where the joint holds."""
+        return vsub(hole_frame.point(hole_local), pin_frame.point(pin_local))
+
+    def gap(self, residual: tuple):
+        """How far apart the joint's two sides are, m, from its
+        [`residual`][jaxcrank.physics.linkage.Revolute.residual]."""
+        return jnp.hypot(jnp.asarray(residual[0], dtype=float), jnp.asarray(residual[1], dtype=float))
+
+    def side_angles(self) -> tuple:
+        """The angles of the joint's hole and pin frames on their bodies, rad (none for a pin)."""
+        return 0.0, 0.0
+
+    def load(self, unknowns: tuple, hole_angle) -> tuple:
+        """The load an ideal joint passes to its pin side for its two unknowns (the
+        force's x and y, N): (force, a pair, N; pure moment, N m)."""
+        return (unknowns[0], unknowns[1]), 0.0
 
 
 class Prismatic(eqx.Module):
@@ -132,8 +171,14 @@ class Prismatic(eqx.Module):
     Attributes:
         guide: the body and point the axis runs through (``"ground"`` for a fixed guide).
         slider: the sliding body and its point on the axis.
-        direction: the axis direction in the guide body's frame, rad.
+        direction: the axis direction in the guide body's frame, rad (the angle from the
+            guide body's x axis to the axis, counter-clockwise; on the ground, from the
+            world's x axis).
         angle: the slider body's angle minus the guide body's, rad (held by the joint).
+        branch: where this joint is the middle joint of a dyad of the ideal mechanism (a
+            block on a turning guide), which way it is assembled: ``"+"`` where the axis
+            direction points from the guide body's pivot towards the slider body's pivot,
+            ``"-"`` the other way; ``None``: nearest the ``guess`` poses, or ``"+"``.
     """
 
     kind: ClassVar[str] = "prismatic"
@@ -141,149 +186,45 @@ class Prismatic(eqx.Module):
     slider: Site = eqx.field(static=True)
     direction: float = 0.0
     angle: float = 0.0
+    branch: str | None = eqx.field(static=True, default=None)
+
+    def __check_init__(self):
+        _check_branch(self)
 
     def sites(self) -> tuple[Site, Site]:
         return self.guide, self.slider
 
+    def residual(self, guide_frame, moving_frame, guide_local, moving_local) -> tuple:
+        """The joint's two closure equations for frames of its two bodies (the guide's, the
+        sliding one's: objects with ``point(local)`` and ``angle``) and its points in them:
+        the sliding point's distance from the guide's line, m, and the sliding body's angle
+        less the guide body's and ``angle``, rad (wrapped to (-pi, pi]); zero where the joint
+        holds."""
+        g = guide_frame.point(guide_local)
+        s = moving_frame.point(moving_local)
+        d = cos_sin(add(guide_frame.angle, self.direction))
+        c, s_ = cos_sin(sub(sub(moving_frame.angle, guide_frame.angle), self.angle))
+        return vcross(d, vsub(s, g)), atan2(s_, c)
+
+    def gap(self, residual: tuple):
+        """How far the slider point is from the guide's line, m, from the joint's
+        [`residual`][jaxcrank.physics.linkage.Prismatic.residual]."""
+        return jnp.abs(jnp.asarray(residual[0], dtype=float))
+
+    def side_angles(self) -> tuple:
+        """The angles of the joint's guide and slider frames on their bodies, rad: the axis
+        direction on the guide body, and the same axis seen from the slider body."""
+        return self.direction, self.direction - self.angle
+
+    def load(self, unknowns: tuple, guide_angle) -> tuple:
+        """The load an ideal joint passes to its slider side for its two unknowns (the
+        force normal to the axis, N, and the moment, N m), the guide body at ``guide_angle``
+        (rad): (force, a pair, N; pure moment, N m)."""
+        c, s = cos_sin(add(guide_angle, self.direction))
+        return (mul(unknowns[0], neg(s)), mul(unknowns[0], c)), unknowns[1]
+
 
 Connection = Revolute | Prismatic
-
-
-# --------------------------------------------------------------------------- drivers
-
-
-class AbstractDriver(eqx.Module):
-    """What turns the linkage: a prescribed angle of ``body`` (``prescribed``), or a
-    torque on it. The body must be jointed to the ground. Every driver has an
-    ``initial_angle`` (rad), the body's angle at t = 0.
-
-    ``speed_scale`` (rad/s) scales the state's rates; ``period`` (s) is the time of one
-    revolution (at the nominal speed for a torque driver).
-    """
-
-    name: ClassVar[str]
-    prescribed: ClassVar[bool]
-    body: eqx.AbstractVar[str]
-
-    @property
-    @abc.abstractmethod
-    def speed_scale(self):
-        """Nominal angular speed, rad/s (stop-gradient where used as a scale)."""
-
-    @property
-    def period(self):
-        """Time of one revolution at the nominal speed, s."""
-        return 2.0 * math.pi / self.speed_scale
-
-    def angle(self, t: Float[ArrayLike, ""]) -> Float[Array, ""]:
-        """The prescribed angle of the driven body at time t, rad."""
-        raise NotImplementedError(f"a {self.name!r} driver prescribes no angle")
-
-
-class ConstantSpeed(AbstractDriver):
-    """The driven body turns at a constant speed: angle = initial_angle + speed t.
-
-    Attributes:
-        body: the driven body (jointed to the ground).
-        speed: rad/s, > 0.
-        initial_angle: its angle at t = 0, rad.
-    """
-
-    name: ClassVar[str] = "constant_speed"
-    prescribed: ClassVar[bool] = True
-    body: str = eqx.field(static=True)
-    speed: float
-    initial_angle: float = 0.0
-
-    def __check_init__(self):
-        check_range("driver.speed", self.speed, low=0.0, unit="rad/s")
-        check_range("driver.initial_angle", self.initial_angle, unit="rad")
-
-    @property
-    def speed_scale(self):
-        return self.speed
-
-    def angle(self, t):
-        return self.initial_angle + self.speed * t
-
-
-class SpeedProfile(AbstractDriver):
-    """A prescribed, periodic speed: ``omega(t) = speed (1 + sum_k c_k cos(k speed t) +
-    s_k sin(k speed t))`` for harmonics k = 1, 2, ..., so the angle is
-    ``initial_angle + speed t + sum_k (c_k sin(k speed t) + s_k (1 - cos(k speed t))) / k``
-    and one revolution still takes 2 pi / speed.
-
-    Attributes:
-        body: the driven body (jointed to the ground).
-        speed: mean angular speed, rad/s, > 0.
-        initial_angle: rad.
-        cosine: relative amplitudes c_k of the cosine harmonics (dimensionless).
-        sine: relative amplitudes s_k of the sine harmonics (dimensionless).
-
-    Raises:
-        ParameterError: when the amplitudes could make the speed reach zero
-            (sum of |c_k| + |s_k| must stay below 1).
-    """
-
-    name: ClassVar[str] = "speed_profile"
-    prescribed: ClassVar[bool] = True
-    body: str = eqx.field(static=True)
-    speed: float
-    initial_angle: float = 0.0
-    cosine: tuple[float, ...] = ()
-    sine: tuple[float, ...] = ()
-
-    def __check_init__(self):
-        check_range("driver.speed", self.speed, low=0.0, unit="rad/s")
-        amps = [_concrete(a) for a in (*self.cosine, *self.sine)]
-        if all(a is not None for a in amps) and sum(float(np.abs(a)) for a in amps) >= 1.0:
-            raise ParameterError(
-                "driver harmonics: the sum of |cosine| + |sine| amplitudes must be below 1 (valid range: [0, 1)), "
-                "or the speed would reach zero"
-            )
-
-    @property
-    def speed_scale(self):
-        return self.speed
-
-    def angle(self, t):
-        w = self.speed
-        out = self.initial_angle + w * t
-        for k, c in enumerate(self.cosine, start=1):
-            out = out + c * jnp.sin(k * w * t) / k
-        for k, s in enumerate(self.sine, start=1):
-            out = out + s * (1.0 - jnp.cos(k * w * t)) / k
-        return out
-
-
-class Torque(AbstractDriver):
-    """A constant torque on the driven body, which turns freely from an initial speed
-    (zero torque: a free-running mechanism).
-
-    Attributes:
-        body: the driven body (jointed to the ground).
-        torque: N m, on the body, counter-clockwise positive.
-        initial_angle: rad.
-        initial_speed: rad/s, > 0 (also the nominal speed that scales the state).
-    """
-
-    name: ClassVar[str] = "torque"
-    prescribed: ClassVar[bool] = False
-    body: str = eqx.field(static=True)
-    torque: float = 0.0
-    initial_angle: float = 0.0
-    initial_speed: float = 1.0
-
-    def __check_init__(self):
-        check_range("driver.torque", self.torque, unit="N m")
-        check_range("driver.initial_speed", self.initial_speed, low=0.0, unit="rad/s")
-
-    @property
-    def speed_scale(self):
-        return self.initial_speed
-
-
-DRIVERS: dict[str, type[AbstractDriver]] = {d.name: d for d in (ConstantSpeed, SpeedProfile, Torque)}
 
 
 # --------------------------------------------------------------------------- outputs
@@ -364,8 +305,9 @@ class Linkage(AbstractMechanism):
         name: a label for reports.
 
     Raises:
-        ParameterError: a description that does not hold together (the message names
-            the joint, body or point): see [`jaxcrank.physics.topology.check`][].
+        ParameterError: names that do not hold together (the message names the joint,
+            body or point). The structure (its loops, its driver) and the assembly are
+            checked when the linkage is compiled ([`jaxcrank.physics.compiled.compile_model`][]).
     """
 
     bodies: dict[str, Body]
@@ -379,13 +321,50 @@ class Linkage(AbstractMechanism):
 
     def __check_init__(self):
         check_range("gravity", self.gravity, low=0.0, low_open=False, unit="m/s^2")
-        from .topology import check
-
-        check(self)
+        _check_names(self)
         _check_outputs(self.outputs, self.bodies)
 
     def linkage(self) -> Linkage:
         return self
+
+
+def _check_names(lk: Linkage) -> None:
+    """Raise a one-line ParameterError for names that do not hold together: a body named
+    like the ground, a joint without a law (or a law without a joint), a law for the other
+    kind of joint, a joint on an unknown body or point or joining a body to itself, a
+    driver on an unknown body."""
+    if GROUND in lk.bodies:
+        raise ParameterError(f"a body cannot be named {GROUND!r}: that name is the ground's")
+    if not lk.bodies:
+        raise ParameterError("a linkage needs at least one moving body")
+    for j in sorted(set(lk.connections) - set(lk.joints)):
+        raise ParameterError(f'joint {j!r} has no law: give it one (e.g. law = "ideal")')
+    for j in sorted(set(lk.joints) - set(lk.connections)):
+        raise ParameterError(f"joint {j!r} has a law but no connection (which bodies and points it joins)")
+    points = {b: body.points for b, body in lk.bodies.items()} | {GROUND: lk.ground}
+    bodies = ", ".join(sorted(lk.bodies))
+    for j, conn in sorted(lk.connections.items()):
+        law = lk.joints[j]
+        if not isinstance(law, AbstractJointLaw):
+            raise ParameterError(f"joint {j}: {law!r} is not a joint law (e.g. jaxcrank.Clearance(...))")
+        if conn.kind not in law.kinds:
+            raise ParameterError(
+                f"joint {j!r} is {conn.kind} but its law {law.name!r} is for {' and '.join(law.kinds)} joints"
+            )
+        for site in conn.sites():
+            if site.body not in points:
+                raise ParameterError(
+                    f"joint {j!r} is on an unknown body {site.body!r}; bodies: {bodies} (and {GROUND!r})"
+                )
+            if site.point not in points[site.body]:
+                raise ParameterError(
+                    f"joint {j!r}: body {site.body!r} has no point {site.point!r}; "
+                    f"its points: {', '.join(sorted(points[site.body])) or 'none'}"
+                )
+        if conn.sites()[0].body == conn.sites()[1].body:
+            raise ParameterError(f"joint {j!r} joins body {conn.sites()[0].body!r} to itself")
+    if lk.driver.body not in lk.bodies:
+        raise ParameterError(f"the driver is on an unknown body {lk.driver.body!r}; bodies: {bodies}")
 
 
 def _check_outputs(outputs: Outputs, bodies: dict[str, Body]) -> None:

@@ -12,7 +12,10 @@ The parts:
 - [`jaxcrank.physics.linkage`][]: the description (bodies, joints, driver, outputs);
 - [`jaxcrank.physics.joints`][]: the joint laws (ideal, clearance) and their interface;
 - [`jaxcrank.physics.topology`][]: the tree and the assembly plan, from the names;
-- [`jaxcrank.physics.closure`][]: the ideal mechanism's poses;
+- [`jaxcrank.physics.closure`][]: loops of ideal joints closed (dyads in closed form, root
+  finds), the ideal mechanism's poses;
+- [`jaxcrank.physics.compiled`][]: the compiled model (a description's structure beside its
+  numbers), which every function below takes;
 - [`jaxcrank.physics.state`][]: the state vector and its scales;
 - [`jaxcrank.physics.kinematics`][]: body poses from s, their rates, the joints' motion;
 - [`jaxcrank.physics.memory`][]: the approach-speed memory laws;
@@ -27,13 +30,17 @@ This module re-exports their public names.
 
 from __future__ import annotations
 
+from .compiled import Model, Structure, as_model, compile_model
 from .dynamics import Dynamics, dynamics, vector_field
 from .frame import Frame, evaluate
 from .kinematics import (
+    closure_residuals,
     coordinates,
     frame_poses,
+    ideal_poses,
     joint_eccentricities,
     joint_motion,
+    newton_poses,
     positions,
     state_from_eccentricities,
 )
@@ -48,22 +55,28 @@ from .state import (
     state_names,
     state_scales,
     state_size,
-    structure,
     unpack,
 )
 
 __all__ = [
     "Dynamics",
     "Frame",
+    "Model",
     "State",
+    "Structure",
+    "as_model",
     "auxiliary",
+    "closure_residuals",
+    "compile_model",
     "coordinates",
     "dynamics",
     "evaluate",
     "frame_poses",
+    "ideal_poses",
     "initial_state",
     "joint_eccentricities",
     "joint_motion",
+    "newton_poses",
     "law_slices",
     "law_state_names",
     "length_scale",
@@ -73,7 +86,6 @@ __all__ = [
     "state_names",
     "state_scales",
     "state_size",
-    "structure",
     "unpack",
     "vector_field",
 ]

@@ -10,8 +10,8 @@ A name is a dotted path through the mechanism's fields and dict keys:
 
 Two shorthands:
 
-- ``clearance_<joint>``: that joint's radial clearance, m (setting it shrinks the pin
-  and keeps the hole);
+- ``clearance_<joint>``: that joint's clearance, m, set as its law sets it (a pin in a
+  hole: the pin shrinks and the hole stays; a slider in its guide: the gap on each side);
 - ``contact.<field>``, ``friction.<field>``, ``memory.<field>`` (and any other part of a
   joint law): that field in every joint whose law has it, tied to one value.
 
@@ -27,7 +27,9 @@ import equinox as eqx
 from .linkage import AbstractMechanism
 from .params import ParameterError
 
-_TIED_PARTS = ("contact", "friction", "memory", "pin_material", "hole_material")
+#: the parts of a joint law that a tied name (``contact.restitution``) sets in every joint
+#: that has them; config files and the command line take them as top-level tables too
+TIED_PARTS = ("contact", "friction", "memory", "pin_material", "hole_material")
 
 
 def _step(obj, part: str):
@@ -58,10 +60,23 @@ def _clearance_joint(mech: AbstractMechanism, name: str) -> str | None:
     return joint
 
 
+def with_joint_clearance(mech: AbstractMechanism, joint: str, clearance) -> AbstractMechanism:
+    """``mech`` with joint ``joint``'s clearance set as its law sets it
+    ([`AbstractJointLaw.with_clearance`][jaxcrank.physics.joints.AbstractJointLaw.with_clearance]); m, traceable.
+
+    Raises:
+        ParameterError: an unknown or ideal joint, or a known value out of the law's range
+            (the message names ``clearance_<joint>``).
+    """
+    _clearance_joint(mech, f"clearance_{joint}")
+    law = mech.joints[joint].with_clearance(clearance, joint)
+    return eqx.tree_at(lambda m: m.joints[joint], mech, law)
+
+
 def _tied(mech: AbstractMechanism, name: str) -> list[tuple[str, ...]]:
     """The full paths a tied name (``contact.restitution``) stands for."""
     parts = name.split(".")
-    if parts[0] not in _TIED_PARTS:
+    if parts[0] not in TIED_PARTS:
         return []
     out = []
     for joint in sorted(mech.joints):
@@ -114,8 +129,7 @@ def set_parameter(mech: AbstractMechanism, name: str, x) -> AbstractMechanism:
     """
     joint = _clearance_joint(mech, name)
     if joint is not None:
-        law = mech.joints[joint]
-        return eqx.tree_at(lambda m: m.joints[joint].pin_radius, mech, law.hole_radius - x)
+        return with_joint_clearance(mech, joint, x)
     for path in _paths(mech, name):
         mech = eqx.tree_at(_getter(path), mech, x)
     return mech

@@ -16,14 +16,13 @@ from collections.abc import Callable
 import equinox as eqx
 import numpy as np
 
+from .drivers import AbstractDriver, ConstantSpeed
 from .guide import GuideClearance
 from .joints import AbstractJointLaw, Clearance, Ideal
 from .linkage import (
-    AbstractDriver,
     AbstractMechanism,
     Body,
     BodyVector,
-    ConstantSpeed,
     Linkage,
     Outputs,
     Point,

@@ -17,9 +17,11 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from .compiled import Model, as_model
 from .frame import Frame
 from .linkage import AbstractMechanism
-from .state import structure
+
+Mechanism = AbstractMechanism | Model
 
 DEG = 180.0 / math.pi
 
@@ -55,9 +57,15 @@ def _acceleration_name(body: str, coordinate: str) -> str:
     return f"{body}_{label}_deviation_{unit}"
 
 
-def signal_meanings(mech: AbstractMechanism) -> dict[str, str]:
+def _wrapped(angle):
+    """An angle difference, rad, brought into [-pi, pi] (unchanged where it is already)."""
+    return angle - 2.0 * math.pi * jnp.floor(angle / (2.0 * math.pi) + 0.5)
+
+
+def signal_meanings(mech: Mechanism) -> dict[str, str]:
     """Signal name -> what it is, for this mechanism (units in the names)."""
-    lk, tree = structure(mech)
+    model = as_model(mech)
+    lk, tree = model.linkage, model.tree
     out = {}
     for body, coord in lk.outputs.deviations:
         out[_deviation_name(body, coord)] = f"{body} {coord} minus ideal"
@@ -76,16 +84,18 @@ def signal_meanings(mech: AbstractMechanism) -> dict[str, str]:
     return out
 
 
-def signals(mech: AbstractMechanism, frame: Frame) -> dict[str, Array]:
+def signals(mech: Mechanism, frame: Frame) -> dict[str, Array]:
     """The per-sample signals of [`signal_meanings`][jaxcrank.physics.signals.signal_meanings] from a
     [`Frame`][jaxcrank.physics.frame.Frame] (one instant, or arrays of them along a leading axis); SI units
-    and degrees."""
-    lk, tree = structure(mech)
+    and degrees (angle deviations wrapped to [-180, 180] deg)."""
+    model = as_model(mech)
+    lk, tree = model.linkage, model.tree
     out = {}
     for body, coord in lk.outputs.deviations:
         i = tree.bodies.index(body)
         k, _, _, factor = _COORDINATE[coord]
-        out[_deviation_name(body, coord)] = (frame.q[..., i, k] - frame.ideal_q[..., i, k]) * factor
+        deviation = frame.q[..., i, k] - frame.ideal_q[..., i, k]
+        out[_deviation_name(body, coord)] = (_wrapped(deviation) if coord == "angle" else deviation) * factor
     if lk.outputs.acceleration is not None:
         body, coord = lk.outputs.acceleration
         i = tree.bodies.index(body)
@@ -102,13 +112,14 @@ def signals(mech: AbstractMechanism, frame: Frame) -> dict[str, Array]:
     return out
 
 
-def metric_definitions(mech: AbstractMechanism) -> dict[str, Metric]:
+def metric_definitions(mech: Mechanism) -> dict[str, Metric]:
     """Headline metric name -> [`Metric`][jaxcrank.physics.signals.Metric] for this mechanism; units are the
     name's suffix. Deviations get their largest and RMS values, the output link's
     acceleration deviation its largest, every joint its peak and RMS force, every
     clearance joint its largest penetration, the driver its peak moment and RMS
     deviation, the transmission angle its RMS and largest error."""
-    lk, tree = structure(mech)
+    model = as_model(mech)
+    lk, tree = model.linkage, model.tree
     out = {}
     for body, coord in lk.outputs.deviations:
         sig = _deviation_name(body, coord)
@@ -140,24 +151,23 @@ def metric_definitions(mech: AbstractMechanism) -> dict[str, Metric]:
     return out
 
 
-def peak_metrics(mech: AbstractMechanism) -> tuple[str, ...]:
+def peak_metrics(mech: Mechanism) -> tuple[str, ...]:
     """The metrics that are maxima (taken at every accepted solver step by the tracking)."""
     return tuple(k for k, m in metric_definitions(mech).items() if m.reduction in ("max_abs", "max"))
 
 
-def rms_metrics(mech: AbstractMechanism) -> tuple[str, ...]:
+def rms_metrics(mech: Mechanism) -> tuple[str, ...]:
     """The metrics that are time averages of squares (deviations, forces): the ones the
     ensemble gradient follows."""
     return tuple(k for k, m in metric_definitions(mech).items() if m.reduction == "rms")
 
 
-def force_metrics(mech: AbstractMechanism) -> tuple[str, ...]:
+def force_metrics(mech: Mechanism) -> tuple[str, ...]:
     """The peak contact-force metrics, whose whole-run maxima a tracked solve also keeps."""
-    _, tree = structure(mech)
-    return tuple(f"peak_contact_force_{j}_N" for j in tree.joints)
+    return tuple(f"peak_contact_force_{j}_N" for j in as_model(mech).tree.joints)
 
 
-def rms_signals(mech: AbstractMechanism, frame: Frame) -> Array:
+def rms_signals(mech: Mechanism, frame: Frame) -> Array:
     """The signals behind [`rms_metrics`][jaxcrank.physics.signals.rms_metrics], stacked in that order along the last
     axis."""
     sig = signals(mech, frame)
@@ -165,7 +175,7 @@ def rms_signals(mech: AbstractMechanism, frame: Frame) -> Array:
     return jnp.stack([sig[defs[k].signal] for k in rms_metrics(mech)], axis=-1)
 
 
-def peak_values(mech: AbstractMechanism, frame: Frame) -> Array:
+def peak_values(mech: Mechanism, frame: Frame) -> Array:
     """The values whose running maxima give [`peak_metrics`][jaxcrank.physics.signals.peak_metrics] (|signal| for
     ``max_abs``), stacked in that order."""
     sig = signals(mech, frame)
@@ -177,7 +187,7 @@ def peak_values(mech: AbstractMechanism, frame: Frame) -> Array:
     return jnp.stack(out, axis=-1)
 
 
-def initial_peaks(mech: AbstractMechanism) -> Array:
+def initial_peaks(mech: Mechanism) -> Array:
     """Starting values of the running maxima (-inf for ``max`` metrics, 0 for ``max_abs``)."""
     defs = metric_definitions(mech)
     return jnp.array([-jnp.inf if defs[k].reduction == "max" else 0.0 for k in peak_metrics(mech)])

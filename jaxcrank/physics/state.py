@@ -6,6 +6,9 @@ ideal motion and pins centred in their holes. Every entry is dimensionless
 ([`state_scales`][jaxcrank.physics.state.state_scales]):
 
 ``y = (s, s', the joint laws' states (joint by joint, sorted), driver work, dissipated work)``.
+
+Every function takes a compiled [`Model`][jaxcrank.physics.compiled.Model] (or a
+mechanism, which it compiles first).
 """
 
 from __future__ import annotations
@@ -16,56 +19,37 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .compiled import Model, as_model
 from .linkage import GROUND, AbstractMechanism, Linkage
 from .safemath import div, known, mul, sqrt, stop_gradient, vdot, vsub
-from .topology import Skeleton, Tree, tree_of
+
+Mechanism = AbstractMechanism | Model
 
 
-def structure(mech: AbstractMechanism) -> tuple[Linkage, Tree]:
-    """The mechanism's [`Linkage`][jaxcrank.physics.linkage.Linkage] and its
-    [`Tree`][jaxcrank.physics.topology.Tree] (the tree is cached by the linkage's names)."""
-    lk = mech.linkage()
-    return lk, tree_of(Skeleton.of(lk))
-
-
-def n_dof(mech: AbstractMechanism) -> int:
+def n_dof(model: Mechanism) -> int:
     """Number of generalized coordinates s (static)."""
-    return structure(mech)[1].n
+    return as_model(model).structure.n
 
 
-def law_slices(mech: AbstractMechanism) -> dict[str, slice]:
+def law_slices(model: Mechanism) -> dict[str, slice]:
     """Where each cut joint's law state sits in the state vector (static)."""
-    return tree_law_slices(*structure(mech))
+    return as_model(model).structure.law_slices
 
 
-def tree_law_slices(lk: Linkage, tree: Tree) -> dict[str, slice]:
-    """[`law_slices`][jaxcrank.physics.state.law_slices] of a linkage and its tree."""
-    start = 2 * tree.n
-    out = {}
-    for j in tree.cut:
-        k = len(lk.joints[j].state_names())
-        out[j] = slice(start, start + k)
-        start += k
-    return out
-
-
-def law_state_names(mech: AbstractMechanism) -> tuple[str, ...]:
+def law_state_names(model: Mechanism) -> tuple[str, ...]:
     """Names of the law state entries, ``<joint>.<entry>`` in state order (static)."""
-    lk, tree = structure(mech)
-    return tuple(f"{j}.{name}" for j in tree.cut for name in lk.joints[j].state_names())
+    return as_model(model).structure.law_state_names
 
 
-def state_size(mech: AbstractMechanism) -> int:
+def state_size(model: Mechanism) -> int:
     """Length of the state vector (static): s, s', the law states, two works."""
-    return 2 * n_dof(mech) + len(law_state_names(mech)) + 2
+    return as_model(model).structure.state_size
 
 
-def state_names(mech: AbstractMechanism) -> tuple[str, ...]:
+def state_names(model: Mechanism) -> tuple[str, ...]:
     """A name for every state entry (static): ``<body>.<coordinate>``, ``d/dt <body>.<coordinate>``,
     ``<joint>.<law entry>``, ``driver_work``, ``dissipated_work``."""
-    _, tree = structure(mech)
-    coords = [f"{b}.{k}" for b, k in tree.coordinates]
-    return (*coords, *(f"d/dt {c}" for c in coords), *law_state_names(mech), "driver_work", "dissipated_work")
+    return as_model(model).structure.state_names
 
 
 class State(NamedTuple):
@@ -79,18 +63,20 @@ class State(NamedTuple):
     dissipated_work: jax.Array  # work dissipated by the joint laws, J
 
 
-def unpack(mech: AbstractMechanism, y: Float[ArrayLike, "*batch state"]) -> State:
+def unpack(model: Mechanism, y: Float[ArrayLike, "*batch state"]) -> State:
     """The scaled state ``y`` (shape (..., [`state_size`][jaxcrank.physics.state.state_size])) as a
     [`State`][jaxcrank.physics.state.State] in SI units."""
-    phys = y * state_scales(mech)
-    n = n_dof(mech)
+    model = as_model(model)
+    phys = y * state_scales(model)
+    n = model.structure.n
     return State(phys[..., :n], phys[..., n : 2 * n], phys[..., 2 * n : -2], phys[..., -2], phys[..., -1])
 
 
-def auxiliary(mech: AbstractMechanism, y: Float[ArrayLike, "*batch state"]) -> Float[Array, "*batch aux"]:
+def auxiliary(model: Mechanism, y: Float[ArrayLike, "*batch state"]) -> Float[Array, "*batch aux"]:
     """The state entries after the coordinates and their rates (the law states, then
     driver and dissipated work), in SI units."""
-    return (y * state_scales(mech))[..., 2 * n_dof(mech) :]
+    model = as_model(model)
+    return (y * state_scales(model))[..., 2 * model.structure.n :]
 
 
 def _largest(values):
@@ -101,16 +87,15 @@ def _largest(values):
     return out
 
 
-def tree_length_scale(lk: Linkage, tree: Tree):
-    """[`length_scale`][jaxcrank.physics.state.length_scale] of a linkage and its tree (a number where the
-    clearances are numbers)."""
-    clearances = [lk.joints[j].clearance for j in tree.cut]
+def _length_scale(model: Model):
+    lk = model.linkage
+    clearances = [lk.joints[j].clearance for j in model.tree.cut]
     return stop_gradient(_largest(clearances)) if clearances else 1.0
 
 
-def length_scale(mech: AbstractMechanism) -> Float[Array, ""]:
+def length_scale(model: Mechanism) -> Float[Array, ""]:
     """Reference length of the deviations, m: the largest clearance of a cut joint (1 m if none)."""
-    return jnp.asarray(tree_length_scale(*structure(mech)), dtype=float)
+    return jnp.asarray(_length_scale(as_model(model)), dtype=float)
 
 
 def body_sizes(lk: Linkage) -> dict[str, Array]:
@@ -137,10 +122,11 @@ def reference_momentum(lk: Linkage) -> Array:
     return stop_gradient(mul(_largest(masses), body_sizes(lk)[driven]))
 
 
-def tree_state_scales(lk: Linkage, tree: Tree) -> list:
-    """[`state_scales`][jaxcrank.physics.state.state_scales] of a linkage and its tree, a list of scalars
-    (numbers where the linkage's values are)."""
-    ell = tree_length_scale(lk, tree)
+def scales(model: Model) -> list:
+    """[`state_scales`][jaxcrank.physics.state.state_scales] as a list of scalars (numbers
+    where the model's values are)."""
+    lk, tree = model.linkage, model.tree
+    ell = _length_scale(model)
     omega = stop_gradient(lk.driver.speed_scale)
     sizes = body_sizes(lk)
     q = [div(ell, sizes[b]) if kind == "angle" else ell for b, kind in tree.coordinates]
@@ -149,7 +135,7 @@ def tree_state_scales(lk: Linkage, tree: Tree) -> list:
     return [*q, *(mul(v, omega) for v in q), *laws, work, work]
 
 
-def state_scales(mech: AbstractMechanism) -> Float[Array, " state"]:
+def state_scales(model: Mechanism) -> Float[Array, " state"]:
     """Physical value of one unit of each state entry.
 
     Lengths in clearances l, angles in l / (the body's size) rad, rates in those times
@@ -159,15 +145,15 @@ def state_scales(mech: AbstractMechanism) -> Float[Array, " state"]:
     condition the error control, so a scalar ``rtol``/``atol`` means the same for every
     entry and every mechanism.
     """
-    return jnp.stack([jnp.asarray(v, dtype=float) for v in tree_state_scales(*structure(mech))])
+    return jnp.stack([jnp.asarray(v, dtype=float) for v in scales(as_model(model))])
 
 
-def initial_state(mech: AbstractMechanism) -> Float[Array, " state"]:
+def initial_state(model: Mechanism) -> Float[Array, " state"]:
     """Pins centred and moving with the ideal mechanism; law states at their initial
     values; works zero."""
-    lk, tree = structure(mech)
-    n = tree.n
+    model = as_model(model)
+    lk, tree = model.linkage, model.tree
     laws = [lk.joints[j].initial_state() for j in tree.cut]
     laws = jnp.concatenate(laws) if laws else jnp.zeros(0)
-    phys = jnp.concatenate([jnp.zeros(2 * n), laws, jnp.zeros(2)])
-    return phys / state_scales(mech)
+    phys = jnp.concatenate([jnp.zeros(2 * tree.n), laws, jnp.zeros(2)])
+    return phys / state_scales(model)

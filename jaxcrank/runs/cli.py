@@ -25,6 +25,7 @@ COMMANDS = {
     "steady": "find the steady state: periodic orbit and its Floquet multipliers, or chaos and long-run statistics",
     "regimes": "classify the steady-state regime (periodic and its period, or not) of every design of a sweep spec",
     "optimize": "minimise the RMS transmission-angle error (paper Eq. 19) or a design objective with optax",
+    "assemble": "assemble a linkage at a driver angle: the poses, each dyad's branch, the lines that keep it",
 }
 
 
@@ -34,9 +35,9 @@ def _simulate_parser(p):
     from . import config
 
     p.description = (
-        "Simulate the offset slider-crank with clearance joints (paper defaults unless "
-        "--config/--design/--set say otherwise) and write trajectory.csv, config.toml, "
-        "summary.json and figures/ into --out."
+        "Simulate a planar linkage with clearance joints (a preset, your own linkage from --config, or an "
+        "optimised design; the paper's offset slider-crank unless --mechanism/--config/--design say otherwise) "
+        "and write trajectory.csv, config.toml, summary.json and figures/ into --out."
     )
     config.add_mechanism_arguments(p, "simulate")
     p.add_argument("--out", type=Path, default=Path("runs/paper"), help="run directory (default: runs/paper)")
@@ -141,6 +142,7 @@ def run_simulate(args) -> int:
             "to_s": float(cols["t"][-1]),
             **outputs.energy_balance(cols, i0=i0),
         },
+        "closure_residual_max_m": outputs.closure_residual(sim),
         "mechanism": mech.linkage().name,
         "units": units,
     }
@@ -358,6 +360,10 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
             from . import regimes_cli
 
             regimes_cli.add_arguments(p)
+        elif name == "assemble":
+            from . import assemble_cli
+
+            assemble_cli.add_arguments(p)
         else:
             from optim import cli as optim_cli
 
@@ -395,6 +401,10 @@ def main(argv=None) -> int:
             from optim import cli as optim_cli
 
             return optim_cli.run(args)
+        if args.command == "assemble":
+            from . import assemble_cli
+
+            return assemble_cli.run(args)
     except (ParameterError, SimulationError, SteadyStateError, CorruptFileError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)
         return 2

@@ -21,11 +21,11 @@ import dataclasses
 import equinox as eqx
 import numpy as np
 
+from ..physics.compiled import compile_model
+from ..physics.drivers import DRIVERS, AbstractDriver
 from ..physics.joints import JOINT_LAWS, AbstractJointLaw
 from ..physics.laws import CONTACT_LAWS, FRICTION_LAWS, AbstractContactLaw, AbstractFrictionLaw
 from ..physics.linkage import (
-    DRIVERS,
-    AbstractDriver,
     AbstractMechanism,
     Body,
     BodyVector,
@@ -117,7 +117,8 @@ def to_dict(mech: AbstractMechanism) -> dict:
             out[name] = _plain(value)
     if isinstance(mech, Linkage):
         for j, conn in mech.connections.items():
-            table = {"type": conn.kind, **{k: _plain(getattr(conn, k)) for k in _fields(conn)}}
+            table = {"type": conn.kind}
+            table.update({k: _plain(getattr(conn, k)) for k in _fields(conn) if getattr(conn, k) is not None})
             out["joints"][j] = {**table, **out["joints"][j]}
     return out
 
@@ -267,7 +268,7 @@ def merge(base: dict, changes: dict) -> dict:
 
 
 #: a written-out linkage's joint table also holds the joint's geometry (read by `_connection`)
-_CONNECTION_KEYS = ("type", "hole", "pin", "guide", "slider", "direction", "angle")
+_CONNECTION_KEYS = ("type", "hole", "pin", "guide", "slider", "direction", "angle", "branch")
 
 
 def _joint_law(table, path, linkage=False):
@@ -287,7 +288,11 @@ def _connection(table, path):
         for key in ("hole", "pin"):
             if key not in table:
                 raise ParameterError(f"[{_where(path)}] a revolute joint needs {key} = 'body.point'")
-        return Revolute(hole=_site(table["hole"], [*path, "hole"]), pin=_site(table["pin"], [*path, "pin"]))
+        return Revolute(
+            hole=_site(table["hole"], [*path, "hole"]),
+            pin=_site(table["pin"], [*path, "pin"]),
+            branch=_branch(table, path),
+        )
     if kind == "prismatic":
         for key in ("guide", "slider"):
             if key not in table:
@@ -297,8 +302,18 @@ def _connection(table, path):
             slider=_site(table["slider"], [*path, "slider"]),
             direction=_number(table.get("direction", 0.0), [*path, "direction"]),
             angle=_number(table.get("angle", 0.0), [*path, "angle"]),
+            branch=_branch(table, path),
         )
     raise ParameterError(f"{_where([*path, 'type'])} must be 'revolute' or 'prismatic', got {kind!r}")
+
+
+def _branch(table, path) -> str | None:
+    from ..physics.linkage import BRANCHES
+
+    value = table.get("branch")
+    if value is not None and value not in BRANCHES:
+        raise ParameterError(f"{_where([*path, 'branch'])} = {value!r} must be one of {', '.join(map(repr, BRANCHES))}")
+    return value
 
 
 def _body(table, path) -> Body:
@@ -334,10 +349,20 @@ def _linkage(data: dict) -> Linkage:
         if key not in data:
             raise ParameterError(f"a linkage needs a [{key}] table")
     joints = data["joints"]
+    for key in ("bodies", "joints"):
+        if not isinstance(data[key], dict) or not all(isinstance(t, dict) for t in data[key].values()):
+            raise ParameterError(f"[{key}] must hold one table per {key[:-1]} ([{key}.<name>]), got {data[key]!r}")
+    connections = {j: _connection(t, ["joints", j]) for j, t in joints.items()}
+    for j, t in joints.items():  # a law for the other kind of joint, named before its settings are read
+        law = JOINT_LAWS.get(t.get("law", "ideal"))
+        if law is not None and connections[j].kind not in law.kinds:
+            raise ParameterError(
+                f"joint {j!r} is {connections[j].kind} but its law {law.name!r} is for {' and '.join(law.kinds)} joints"
+            )
     kwargs = dict(
         ground={k: Point(*_pair(v, 2, ["ground", k])) for k, v in (data.get("ground") or {}).items()},
         bodies={b: _body(t, ["bodies", b]) for b, t in data["bodies"].items()},
-        connections={j: _connection(t, ["joints", j]) for j, t in joints.items()},
+        connections=connections,
         joints={j: _joint_law(t, ["joints", j], linkage=True) for j, t in joints.items()},
         driver=_driver(data["driver"], ["driver"]),
         outputs=_outputs(data.get("outputs", {}), ["outputs"]),
@@ -360,11 +385,23 @@ def from_dict(data: dict, base: AbstractMechanism | None = None) -> AbstractMech
     ``base``) unless it names another kind; without, missing keys of a preset take its
     defaults (the paper's slider-crank when no ``mechanism`` is named), a joint's among
     them: a joint table that names no other law completes the preset's law of that joint.
+    Data with ``[bodies]`` tables and no ``mechanism`` is a linkage written out. The
+    mechanism is compiled ([`jaxcrank.physics.compiled.compile_model`][]): its structure and
+    assembly are checked here.
 
     Raises:
-        ParameterError: for an unknown kind or key, a wrong type or a value out of its
-            range (the message names the table and key).
+        ParameterError: for an unknown kind or key, a wrong type, a value out of its
+            range (the message names the table and key), or a structure or assembly
+            that does not hold together.
     """
+    mech = _mechanism(data, base)
+    compile_model(mech)
+    return mech
+
+
+def _mechanism(data: dict, base: AbstractMechanism | None) -> AbstractMechanism:
+    if "mechanism" not in data and "bodies" in data and (base is None or isinstance(base, Linkage)):
+        data = {"mechanism": "linkage", **data}
     kind = data.get("mechanism")
     if kind is not None and kind not in KINDS:
         raise ParameterError(f"mechanism = {kind!r} is unknown; kinds: {', '.join(KINDS)}")

@@ -24,12 +24,10 @@ import tomli_w
 
 from ..physics.joints import JOINT_LAWS
 from ..physics.linkage import AbstractMechanism
+from ..physics.parameters import TIED_PARTS as TIED
+from ..physics.parameters import with_joint_clearance
 from ..physics.params import ParameterError
 from . import codec
-
-#: top-level tables that apply to every joint whose law has them (the tied names of
-#: [`jaxcrank.physics.parameters`][])
-TIED = ("contact", "friction", "memory", "pin_material", "hole_material")
 
 
 def to_dict(mech: AbstractMechanism) -> dict:
@@ -43,19 +41,33 @@ def _law_fields(table: dict) -> set[str]:
     return {f.name for f in dataclasses.fields(cls) if f.init} if cls is not None else set()
 
 
-def _expand(data: dict, base: AbstractMechanism | None) -> dict:
-    """The shorthands of the module docstring written out as joint tables."""
+def _expand(data: dict, base: AbstractMechanism | None) -> tuple[dict, dict]:
+    """The tied tables of the module docstring written out as joint tables, and the
+    ``clearance_<joint>`` shorthands (set afterwards, by the joints' laws:
+    [`jaxcrank.physics.parameters.with_joint_clearance`][])."""
     data = dict(data)
     tied = {k: data.pop(k) for k in TIED if k in data}
     clearances = {k: data.pop(k) for k in list(data) if k.startswith("clearance_")}
-    if not tied and not clearances:
-        return data
     given = data.get("joints") or {}
     if not isinstance(given, dict):
         raise ParameterError(f"[joints] must be a table of joint tables, got {given!r}")
+    given = dict(given)
     for j, t in given.items():
         if not isinstance(t, dict):
             raise ParameterError(f"[joints.{j}] must be a table, got {t!r}")
+    for key, c in clearances.items():
+        if isinstance(c, bool) or not isinstance(c, (int, float)):
+            raise ParameterError(f"{key} must be a number (the joint's clearance, m), got {c!r}")
+        table = given.get(key[len("clearance_") :], {})
+        for field, what in (("pin_radius", "the pin radius"), ("clearance", "the clearance")):
+            if field in table:
+                raise ParameterError(f"{key} and joints.{key[len('clearance_') :]}.{field} both set {what}: give one")
+        if "hole_radius" in table and "pin_radius" not in table and isinstance(table["hole_radius"], (int, float)):
+            # a pin-in-hole law written here needs its pin to be built: the clearance gives it
+            given[key[len("clearance_") :]] = {**table, "pin_radius": table["hole_radius"] - c}
+            data["joints"] = given
+    if not tied:
+        return data, clearances
     kind = data.get("mechanism")
     if base is not None and kind not in (None, codec.kind_of(base)):
         base = None  # the data names a mechanism of another kind: the base does not apply
@@ -76,36 +88,8 @@ def _expand(data: dict, base: AbstractMechanism | None) -> dict:
             raise ParameterError(f"[{part}]: no joint has {part} settings (give a joint a clearance law first)")
         for j in targets:
             joints.setdefault(j, {})[part] = codec.merge(joints.get(j, {}).get(part, {}), table)
-    for key, c in clearances.items():
-        joint = key[len("clearance_") :]
-        law = laws.get(joint)
-        if law is None:
-            raise ParameterError(f"unknown parameter {key!r}: the joints are {', '.join(sorted(laws))}")
-        mine = given.get(joint, {})
-        if isinstance(c, bool) or not isinstance(c, (int, float)):
-            raise ParameterError(f"{key} must be a number (the joint's clearance, m), got {c!r}")
-        if "hole_radius" in law:  # a revolute clearance: the pin shrinks, the hole stays
-            if "pin_radius" in mine:
-                raise ParameterError(f"{key} and joints.{joint}.pin_radius both set the pin radius: give one of them")
-            hole = law["hole_radius"]
-            if isinstance(hole, bool) or not isinstance(hole, (int, float)):
-                raise ParameterError(f"joints.{joint}.hole_radius must be a number, got {hole!r}")
-            if not 0.0 < c < hole:
-                raise ParameterError(
-                    f"{key} = {c!r} m is out of range: the radial clearance must lie in "
-                    f"(0, joints.{joint}.hole_radius = {hole:g} m)"
-                )
-            joints.setdefault(joint, {})["pin_radius"] = hole - c
-        elif "clearance" in _law_fields(law):  # a law whose clearance is a parameter of its own (a guide's gap)
-            if "clearance" in mine:
-                raise ParameterError(f"{key} and joints.{joint}.clearance both set the clearance: give one of them")
-            if not 0.0 < c < float("inf"):
-                raise ParameterError(f"{key} = {c!r} m is out of range: the clearance must lie in (0, inf)")
-            joints.setdefault(joint, {})["clearance"] = c
-        else:
-            raise ParameterError(f"{key}: joint {joint!r} is ideal; give it a clearance law first")
     data["joints"] = joints
-    return data
+    return data, clearances
 
 
 def from_dict(data: dict, base: AbstractMechanism | None = None) -> AbstractMechanism:
@@ -117,7 +101,11 @@ def from_dict(data: dict, base: AbstractMechanism | None = None) -> AbstractMech
     Raises:
         ParameterError: for an unknown key, a wrong type or a value out of its range.
     """
-    return codec.from_dict(_expand(data, base), base)
+    data, clearances = _expand(data, base)
+    mech = codec.from_dict(data, base)
+    for key, c in clearances.items():
+        mech = with_joint_clearance(mech, key[len("clearance_") :], float(c))
+    return mech
 
 
 def load_toml(path, build):
@@ -133,9 +121,31 @@ def load_toml(path, build):
         raise ParameterError(f"{path}: {err}") from None
 
 
+def _described(data: dict) -> AbstractMechanism:
+    """The mechanism a file describes: it names its kind (``mechanism = ...``), or writes a
+    linkage out (``[bodies]`` tables).
+
+    Raises:
+        ParameterError: for a file that describes no mechanism, or a bad one.
+    """
+    if "mechanism" not in data and "bodies" not in data:
+        found = f"its keys: {', '.join(sorted(data))}" if data else "it is empty"
+        raise ParameterError(
+            f'the file describes no mechanism ({found}): start it with mechanism = "linkage" and write the linkage '
+            "out ([ground], [bodies.<name>], [joints.<name>], [driver]), or name a preset's kind "
+            f"(mechanism = {' or '.join(repr(k) for k in codec.KINDS if k != 'linkage')}) and its dimensions"
+        )
+    return from_dict(data)
+
+
 def load(path) -> AbstractMechanism:
-    """Read a TOML config; raises ParameterError naming the file on malformed input."""
-    return load_toml(path, from_dict)
+    """Read a TOML file describing a mechanism (see the module docstring).
+
+    Raises:
+        ParameterError: naming the file: malformed TOML, a file that describes no
+            mechanism, or a bad description.
+    """
+    return load_toml(path, _described)
 
 
 def load_design(path) -> AbstractMechanism:

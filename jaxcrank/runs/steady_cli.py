@@ -51,7 +51,8 @@ def _section_eccentricities(steady):
     from ..physics import model
 
     mech = steady.mechanism
-    lk, tree = model.structure(mech)
+    compiled = model.compile_model(mech)
+    lk, tree = compiled.linkage, compiled.tree
     out = {}
     for i, joint in enumerate(tree.cut):
         c = float(lk.joints[joint].clearance)

@@ -97,14 +97,15 @@ class Onsets(NamedTuple):
 def audited_joints(mech: AbstractMechanism) -> tuple[str, ...]:
     """Names of the mechanism's dry clearance joints (cut joints whose law is a
     [`Clearance`][jaxcrank.physics.joints.Clearance]), in state order (static)."""
-    lk, tree = model.structure(mech)
-    return tuple(j for j in tree.cut if isinstance(lk.joints[j], Clearance))
+    compiled = model.compile_model(mech)
+    return tuple(j for j in compiled.tree.cut if isinstance(compiled.linkage.joints[j], Clearance))
 
 
 def _joint_state(mech: AbstractMechanism, t, y):
     """(penetration [m], penetration rate [m/s], approach speed used [m/s]) per audited
     joint at (t, y), shape (k,) each (rate 0 where the pin is centred)."""
-    lk, tree = model.structure(mech)
+    compiled = model.compile_model(mech)
+    lk, tree = compiled.linkage, compiled.tree
     d_all, d_rate_all = model.joint_eccentricities(mech, t, y)
     law_state = model.unpack(mech, y).law_state
     slices = model.law_slices(mech)
