@@ -7,7 +7,17 @@ metrics each code also runs ``--starts`` starts (every entry + k * 1e-15, k = 0,
 their mean and standard deviation per code, and the difference of the two means in units
 of its standard error.
 
-    python bench/paper_equivalence.py --base cdff866 [--starts 8]   # -> bench/results/paper_equivalence.json
+    python bench/paper_equivalence.py --base cdff866 [--starts 8] [--repeats 3]
+    # -> bench/results/paper_equivalence.json
+
+Speed, both codes in the same run, on one pinned core: the paper solve (0.4 s, 14401
+samples, metrics after 0.1 s) compiled with the mechanism's numbers as constants, the
+best of five after compilation, per solver step (this code also with the numbers as the
+program's inputs, as its command line compiles them); and the paper run as a user runs it,
+``jaxcrank simulate --no-figures --quiet`` in ``--repeats`` fresh processes of each code
+taken in turn (this code with no cache, with its cache warm, and with
+``--fold-parameters``), the processes' wall times and the solve phases their summaries
+report.
 
 The earlier commit's package is copied (from ``git worktree``) under the name
 ``jaxcrank_base`` and imported beside this one.
@@ -17,12 +27,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import re
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +72,68 @@ def _run(package, perturbation: float):
     return {k: np.asarray(cols[k]) for k in ["t", *COLUMNS]}, {k: float(v) for k, v in sim.metrics.items()}
 
 
+def _solve_cost(package, values: bool) -> dict:
+    """The paper solve's best wall time of five after compilation, and per solver step."""
+    import jax
+    import jax.numpy as jnp
+
+    mech = package.paper()
+    if values:
+        mech = package.solve.as_values(mech)
+    ts = np.asarray(jnp.linspace(0.0, 0.4, 14401))
+    run = jax.jit(lambda m: package.simulate(m, ts=ts, metrics_start=0.1, throw=False))
+    sim = jax.block_until_ready(run(mech))
+    best = min(_wall(lambda: jax.block_until_ready(run(mech))) for _ in range(5))
+    steps = int(sim.num_steps) + int(sim.num_rejected)
+    return {"best_s": best, "steps_incl_rejected": steps, "us_per_step": best / steps * 1e6}
+
+
+def _wall(fn) -> float:
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def _cli_runs(pkg_path: Path, repeats: int, core: int) -> dict:
+    """``--repeats`` fresh processes of each code's ``simulate`` on the paper defaults, in turn."""
+    variants = {
+        "base": ("jaxcrank_base", []),
+        "this_no_cache": ("jaxcrank", ["--no-cache"]),
+        "this_warm_cache": ("jaxcrank", []),
+        "this_fold_parameters": ("jaxcrank", ["--no-cache", "--fold-parameters"]),
+    }
+    runs = {name: [] for name in variants}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{pkg_path}", JAXCRANK_CACHE_DIR=str(Path(tmp) / "cache"))
+        for k in range(repeats + 1):  # the first round warms this code's cache and is not kept
+            for name, (module, extra) in variants.items():
+                out = Path(tmp) / name
+                cmd = ["taskset", "-c", str(core), sys.executable, "-m", f"{module}.runs.cli", "simulate"]
+                cmd += ["--out", str(out), "--no-figures", "--quiet", *extra]
+                start = time.perf_counter()
+                subprocess.run(cmd, env=env, check=True, capture_output=True, cwd=tmp)
+                wall = time.perf_counter() - start
+                if k == 0:
+                    continue
+                summary = json.loads((out / "summary.json").read_text())
+                row = {"process_s": wall, "wall_time_s": summary["wall_time_s"], "steps": summary["solver"]["steps"]}
+                if "phases_s" in summary:
+                    row["phases_s"] = summary["phases_s"]
+                    row["solve_us_per_step"] = (
+                        summary["phases_s"]["solve"]
+                        / (summary["solver"]["steps"] + summary["solver"]["rejected_steps"])
+                        * 1e6
+                    )
+                runs[name].append(row)
+    medians = {name: float(np.median([r["process_s"] for r in rows])) for name, rows in runs.items()}
+    return {
+        "repeats": repeats,
+        "runs": runs,
+        "median_process_s": medians,
+        "median_process_over_base": {name: m / medians["base"] for name, m in medians.items()},
+    }
+
+
 def _divergence(a, b) -> dict:
     t = a["t"]
     out = {}
@@ -67,6 +141,12 @@ def _divergence(a, b) -> dict:
         i = int(np.searchsorted(t, tt)) + 1
         out[f"{tt:g}"] = {k: float(np.max(np.abs(a[k][:i] - b[k][:i]))) for k in COLUMNS}
     return out
+
+
+def _relative_first_ms(a, b) -> dict:
+    """Per column, the largest difference over the first millisecond over the largest |value| there."""
+    i = int(np.searchsorted(a["t"], 1e-3)) + 1
+    return {k: float(np.max(np.abs(a[k][:i] - b[k][:i])) / max(np.max(np.abs(b[k][:i])), 1e-300)) for k in COLUMNS}
 
 
 def _over_starts(spread: dict) -> dict:
@@ -91,6 +171,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--base", default="cdff866", help="the earlier commit (default: the last slider-crank-only one)")
     p.add_argument("--starts", type=int, default=8, help="starts per code for the metrics' spread (>= 2)")
+    p.add_argument("--repeats", type=int, default=3, help="fresh command-line processes per code (0: none)")
+    p.add_argument("--core", type=int, default=0, help="the CPU core everything is pinned to")
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "paper_equivalence.json")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
@@ -100,27 +182,43 @@ def main(argv=None) -> int:
 
         import jaxcrank
 
+        os.sched_setaffinity(0, {args.core})
         runs, spread = {}, {"this": [], "base": []}
         for name, package in (("this", jaxcrank), ("base", jaxcrank_base)):
             for k in range(max(args.starts, 2)):
                 runs[(name, k * PERTURBATION)] = _run(package, k * PERTURBATION)
                 spread[name].append(runs[(name, k * PERTURBATION)][1])
+        solve_cost = {
+            "base_constants": _solve_cost(jaxcrank_base, values=False),
+            "this_constants": _solve_cost(jaxcrank, values=False),
+            "this_values": _solve_cost(jaxcrank, values=True),
+        }
+        for name in ("this_constants", "this_values"):
+            solve_cost[f"{name}_over_base"] = (
+                solve_cost[name]["us_per_step"] / solve_cost["base_constants"]["us_per_step"]
+            )
+        cli_runs = _cli_runs(Path(tmp) / "pkg", args.repeats, args.core) if args.repeats > 0 else None
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
     metrics = {name: runs[(name, 0.0)][1] for name in ("this", "base")}
     metrics.update({f"{name}_perturbed": runs[(name, PERTURBATION)][1] for name in ("this", "base")})
     result = {
-        "command": f"python bench/paper_equivalence.py --base {args.base} --starts {args.starts}",
+        "command": f"python bench/paper_equivalence.py --base {args.base} --starts {args.starts} "
+        f"--repeats {args.repeats}",
         "this_commit": head,
         "base_commit": args.base,
         "machine": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
         "perturbation_scaled": PERTURBATION,
         "max_abs_difference_up_to_t_s": {
             "this_vs_base": _divergence(runs[("this", 0.0)][0], runs[("base", 0.0)][0]),
             "base_vs_base_perturbed": _divergence(runs[("base", 0.0)][0], runs[("base", PERTURBATION)][0]),
             "this_vs_this_perturbed": _divergence(runs[("this", 0.0)][0], runs[("this", PERTURBATION)][0]),
         },
+        "relative_difference_first_ms_this_vs_base": _relative_first_ms(runs[("this", 0.0)][0], runs[("base", 0.0)][0]),
         "metrics_after_0.1_s": metrics,
         "metrics_over_starts": _over_starts(spread),
+        "solve_cost": solve_cost,
+        "command_line": cli_runs,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2))

@@ -3,6 +3,7 @@ slider-crank (A, B, C) and the four-bar (A, B, C, D), and Flores and Ambrósio's
 high-speed slider-crank (its ideal slider acceleration against the closed form)."""
 
 import argparse
+import dataclasses
 import itertools
 import json
 
@@ -202,3 +203,24 @@ def test_cli_simulate_runs_the_four_bar_preset(tmp_path):
     again, preset = config.load(out / "config.toml"), jc.four_bar()
     assert isinstance(again, jc.FourBar) and jax.tree.structure(again) == jax.tree.structure(preset)
     assert [float(v) for v in jax.tree.leaves(again)] == [float(v) for v in jax.tree.leaves(preset)]
+
+
+def test_cli_metrics_of_a_torque_driven_run_start_where_its_crank_completes_a_turn(tmp_path):
+    """A free-running slider-crank (zero torque, every joint ideal) slows from its initial
+    speed, so its first turn takes longer than one nominal period: ``simulate``'s metrics
+    window starts where the crank angle in ``trajectory.csv`` first reaches its start plus
+    360 deg (within one sample interval), not at 2 pi / initial speed."""
+    mech = jc.SliderCrank(driver=jc.Torque(body="crank", torque=0.0, initial_speed=150.0))
+    mech = dataclasses.replace(mech, joints={name: jc.Ideal() for name in mech.joints})
+    config.save(mech, tmp_path / "free.toml")
+    out = tmp_path / "run"
+    args = ["simulate", "--config", str(tmp_path / "free.toml"), "--out", str(out), "--t1", "0.12", "--no-figures"]
+    assert cli.main([*args, "--quiet"]) == 0
+    table = np.genfromtxt(out / "trajectory.csv", delimiter=",", names=True)
+    turned = np.abs(table["crank_angle"] - table["crank_angle"][0])
+    i = int(np.argmax(turned >= 360.0))
+    assert turned[i] >= 360.0 and i > 0
+    summary = json.loads((out / "summary.json").read_text())
+    start = summary["metrics"]["window_start_s"]
+    assert table["t"][i - 1] <= start <= table["t"][i], (start, table["t"][i - 1 : i + 1])
+    assert start > 1.1 * (2 * np.pi / 150.0) and summary["metrics_window"].startswith("after the first revolution")

@@ -77,12 +77,13 @@ def frames(sim: Simulation) -> model.Frame:
     return _frames(model.compile_model(sim.mechanism), sim.ts, sim.ys)
 
 
-def trajectory(sim: Simulation) -> dict[str, Float[np.ndarray, " n"]]:
+def trajectory(sim: Simulation, frames_: model.Frame | None = None) -> dict[str, Float[np.ndarray, " n"]]:
     """Named output columns of a simulation (SI, angles in degrees;
-    [`columns`][jaxcrank.analysis.outputs.columns] gives their units)."""
+    [`columns`][jaxcrank.analysis.outputs.columns] gives their units); ``frames_``: its
+    [`frames`][jaxcrank.analysis.outputs.frames] where already evaluated."""
     mech = sim.mechanism
     tree = model.compile_model(mech).tree
-    f = frames(sim)
+    f = frames(sim) if frames_ is None else frames_
     cols = {"t": f.t}
     for prefix, q, qd, qdd in (("", f.q, f.qd, f.qdd), ("ideal_", f.ideal_q, f.ideal_qd, f.ideal_qdd)):
         for i, b in enumerate(tree.bodies):

@@ -241,6 +241,25 @@ def _solve(mech, ts, span, y0, solver, controller, dt0, max_steps, adjoint, prog
     )
 
 
+def as_values(mech: Mechanism) -> Mechanism:
+    """``mech`` with every number that is not zero as a float64 array: the values of a
+    compiled program, not constants in it, so one program serves every design of a
+    structure (``simulate(as_values(mech), ...)`` compiles once for a loop over designs;
+    the command line's programs are made so, and kept in the cache). Zeros stay numbers
+    (a point on a body's axis, a driver starting at angle 0): known at trace time, they
+    cost no operation ([`jaxcrank.physics.safemath`][]), and a design that makes one
+    nonzero has a program of its own. [`simulate`][jaxcrank.numerics.solve.simulate] of a
+    mechanism of plain numbers compiles them in as constants, which XLA folds: a solver
+    step costs about a fifth less (the paper run), and every design compiles anew."""
+
+    def value(leaf):
+        if isinstance(leaf, (float, np.floating)) and leaf != 0.0:
+            return jnp.asarray(leaf, dtype=float)
+        return leaf
+
+    return jax.tree_util.tree_map(value, mech)
+
+
 def sample_times(mech: Mechanism, t1=None, n_samples=None, t0=0.0):
     """Equally spaced sample times (equal steps of the driver's nominal angle), s.
     Defaults: four revolutions (0.4 s at 600 rpm), one sample every 0.1 degree."""

@@ -105,25 +105,26 @@ class MetricsTracking(diffrax.AbstractAdaptiveSolver):
         inner, run = solver_state
         y1, y_error, dense_info, inner, result = self.solver.step(terms, t0, t1, y0, args, inner, made_jump)
         mech = args
-        value = signals.peak_values(mech, model.evaluate(mech, t1, y1))
-        peaks = jnp.where(t1 > self.t_start, jnp.maximum(run.peaks, value), run.peaks)
-        whole = jnp.maximum(run.whole_run_peaks, value)
-
         interpolation = self.solver.interpolation_cls(t0=t0, t1=t1, **dense_info)
         n = self.n_samples
 
-        def pending(carry):
-            i = carry[0]
-            return (i < n) & (self.sample_time(i) <= t1)
-
         def visit(carry):
-            i, sums, count = carry
-            t = self.sample_time(i)
-            inside = t > self.t_start
-            sig = signals.rms_signals(mech, model.evaluate(mech, t, interpolation.evaluate(t)))
-            return i + 1, sums + jnp.where(inside, sig**2, 0.0), count + inside.astype(count.dtype)
+            """One output frame: at the next sample time within the step (its RMS signals),
+            else at the step's end (its peaks, and the loop ends); one frame in the program
+            serves both."""
+            i, sums, count, peaks, whole, _ = carry
+            sample = (i < n) & (self.sample_time(i) <= t1)
+            t = jnp.where(sample, self.sample_time(i), t1)
+            frame = model.evaluate(mech, t, jnp.where(sample, interpolation.evaluate(t), y1))
+            sig, value = signals.rms_signals(mech, frame), signals.peak_values(mech, frame)
+            inside = sample & (t > self.t_start)
+            sums = sums + jnp.where(inside, sig**2, 0.0)
+            peaks = jnp.where(~sample & (t1 > self.t_start), jnp.maximum(peaks, value), peaks)
+            whole = jnp.where(sample, whole, jnp.maximum(whole, value))
+            return i + sample.astype(i.dtype), sums, count + inside.astype(count.dtype), peaks, whole, ~sample
 
-        i, sums, count = jax.lax.while_loop(pending, visit, (run.next_sample, run.sums, run.count))
+        carry = (run.next_sample, run.sums, run.count, run.peaks, run.whole_run_peaks, jnp.asarray(False))
+        i, sums, count, peaks, whole, _ = jax.lax.while_loop(lambda c: ~c[-1], visit, carry)
         return y1, y_error, dense_info, (inner, Running(peaks, whole, sums, count, i)), result
 
     def func(self, terms, t0, y0, args):

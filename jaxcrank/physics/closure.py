@@ -26,7 +26,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from .forward import GROUND_FRAME, BodyState, Placed, local_point
+from .forward import GROUND_FRAME, Placed, local_point
 from .linkage import GROUND, Linkage
 from .safemath import (
     add,
@@ -113,7 +113,7 @@ def _length(v: tuple):
     return sqrt(add(mul(v[0], v[0]), mul(v[1], v[1])))
 
 
-def _dyad(lk: Linkage, frames: dict, step: Dyad, sign) -> tuple[dict, object]:
+def place_dyad(lk: Linkage, frames: dict, step: Dyad, sign) -> tuple[dict, object]:
     """Place the two bodies of one dyad on the branch ``sign``; returns the new frames and
     the discriminant of its intersection (negative: it cannot be assembled)."""
     outer, middle, other = (lk.connections[j] for j in step.joints)
@@ -233,8 +233,8 @@ def _chosen_sign(lk: Linkage, frames: dict, step: Dyad):
         target = _guess_point(lk, step.second, local_point(lk, m_v))
     if target is None or step.kind == "PRP":
         return 1.0
-    plus, _ = _dyad(lk, frames, step, 1.0)
-    minus, _ = _dyad(lk, frames, step, -1.0)
+    plus, _ = place_dyad(lk, frames, step, 1.0)
+    minus, _ = place_dyad(lk, frames, step, -1.0)
     gap_plus = vsub(plus[step.first].point(local_point(lk, m_u)), target)
     gap_minus = vsub(minus[step.first].point(local_point(lk, m_u)), target)
     return stop_gradient(where(vdot(gap_plus, gap_plus) <= vdot(gap_minus, gap_minus), 1.0, -1.0))
@@ -259,7 +259,7 @@ def _walk(lk: Linkage, plan: Plan, phi, signs, guesses):
             continue
         sign = _chosen_sign(lk, frames, step) if dyads is None else next(dyads)
         chosen.append(sign)
-        frames, disc = _dyad(lk, frames, step, sign)
+        frames, disc = place_dyad(lk, frames, step, sign)
         discs.append(disc)
     return frames, discs, tuple(chosen)
 
@@ -375,54 +375,3 @@ def guess_at(table, phi0, phi):
     turns = (jax.lax.stop_gradient(jnp.asarray(phi, dtype=float)) - phi0) / (2.0 * math.pi)
     index = jnp.round(turns * samples).astype(int) % samples
     return jax.lax.stop_gradient(table[index])
-
-
-# --------------------------------------------------------------------------- closures in the dynamics
-
-
-def closed_states(lk: Linkage, step, states: dict, sign=1.0, guess=None) -> dict:
-    """The [`BodyState`][jaxcrank.physics.forward.BodyState]s of the bodies a closure step
-    places (a dyad on the branch ``sign``, or a group by its root find from ``guess``),
-    from the states of the bodies it hangs from: their poses by the closure, and the
-    velocities, bias accelerations and Jacobian columns by forward-mode derivatives of it
-    (``J p'``, ``J p'' + p'^T H p'`` and ``J`` times the parents' columns)."""
-    parents = [b for b in step.parents if b != GROUND]
-
-    def poses(p):
-        frames = {GROUND: GROUND_FRAME}
-        for i, b in enumerate(parents):
-            frames[b] = Placed.at((p[3 * i], p[3 * i + 1]), p[3 * i + 2])
-        out = _dyad(lk, frames, step, sign)[0] if isinstance(step, Dyad) else group_frames(lk, step, frames, guess)
-        return jnp.concatenate([out[b].pose() for b in step.bodies])
-
-    def flat(values):
-        return jnp.stack([jnp.asarray(v, dtype=float) for v in values]) if values else jnp.zeros(0)
-
-    st = [states[b] for b in parents]
-    p = flat([v for s in st for v in (*s.frame.origin, s.frame.angle)])
-    pd = flat([v for s in st for v in (*s.velocity, s.angular_velocity)])
-    pdd = flat([v for s in st for v in (*s.acceleration, s.angular_acceleration)])
-    (value, rate), (_, curvature) = jax.jvp(lambda x: jax.jvp(poses, (x,), (pd,)), (p,), (pd,))
-    jac = jax.jacfwd(poses)(p)
-    acc = jac @ pdd + curvature
-    keys = sorted({k for s in st for k in (*s.position_jacobian, *s.angle_jacobian)})
-    columns = {}
-    for k in keys:
-        entries = []
-        for s in st:
-            px, py = s.position_jacobian.get(k, (0.0, 0.0))
-            entries += [px, py, s.angle_jacobian.get(k, 0.0)]
-        columns[k] = jac @ flat(entries)
-    out = {}
-    for i, b in enumerate(step.bodies):
-        x, y, angle = (3 * i, 3 * i + 1, 3 * i + 2)
-        out[b] = BodyState(
-            Placed.at((value[x], value[y]), value[angle]),
-            (rate[x], rate[y]),
-            rate[angle],
-            (acc[x], acc[y]),
-            acc[angle],
-            {k: (c[x], c[y]) for k, c in columns.items()},
-            {k: c[angle] for k, c in columns.items()},
-        )
-    return out

@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
@@ -224,7 +225,7 @@ def dynamics(model: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " st
     return Dynamics(_stack(mo.q), _stack(mo.qd), _stack(e.qdd), e.forces, moment, _stack(e.applied), e.state_rate)
 
 
-@jax.jit
+@eqx.filter_jit
 def vector_field(t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"], model: Model) -> Float[Array, " state"]:
     """dy/dt of the scaled state ``y`` (shape (state_size,)) at time ``t`` (s), for
     diffrax: ``diffrax.ODETerm(vector_field)`` with ``args=model`` (a compiled

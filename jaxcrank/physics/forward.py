@@ -126,21 +126,23 @@ def _place(state_point, angle, rot, omega, alpha, jt, local) -> BodyState:
     )
 
 
-def forward(lk: Linkage, tree: Tree, q, qd, qdd, phi, phid, phidd, closed=None) -> dict[str, BodyState]:
+def forward(
+    lk: Linkage, tree: Tree, q, qd, qdd, phi, phid, phidd, closed=None, columns: bool = True
+) -> dict[str, BodyState]:
     """Every body's [`BodyState`][jaxcrank.physics.forward.BodyState] (and the ground's), for tree coordinates
     ``q`` (a sequence of scalars) with rates ``qd`` and known second rates ``qdd``, and
     the driver angle ``phi`` (rad) with its rates (used where the driver prescribes a
     body's angle). ``closed(step, states)`` gives the states of the bodies a closure step
-    of the tree places ([`jaxcrank.physics.closure.closed_states`][]) from those placed
-    before it."""
+    of the tree places ([`jaxcrank.physics.loops.closed_states`][]) from those placed
+    before it. ``columns=False`` leaves the Jacobian columns out (empty): the motion alone."""
     m = tree.n + 1
     out = {GROUND: GROUND_STATE}
 
     def angle_of(own, driven):
         if driven and len(own) == 0:
-            return phi, phid, phidd, {m - 1: 1.0}
+            return phi, phid, phidd, ({m - 1: 1.0} if columns else {})
         k = own[0]
-        return q[k], qd[k], qdd[k], {k: 1.0}
+        return q[k], qd[k], qdd[k], ({k: 1.0} if columns else {})
 
     for p in tree.steps:
         if not isinstance(p, Placement):
@@ -150,7 +152,7 @@ def forward(lk: Linkage, tree: Tree, q, qd, qdd, phi, phid, phidd, closed=None) 
         if p.kind == "floating":  # its coordinates are its centre of mass and angle
             ix, iy = own[0], own[1]
             angle, omega, alpha, jt = angle_of(own[2:], p.driven)
-            jp = {ix: (1.0, 0.0), iy: (0.0, 1.0)}
+            jp = {ix: (1.0, 0.0), iy: (0.0, 1.0)} if columns else {}
             centre = ((q[ix], q[iy]), (qd[ix], qd[iy]), (qdd[ix], qdd[iy]), jp)
             local = lk.bodies[p.body].centre_of_mass.pair()
             out[p.body] = _place(centre, angle, cos_sin(angle), omega, alpha, jt, local)
@@ -180,7 +182,11 @@ def forward(lk: Linkage, tree: Tree, q, qd, qdd, phi, phid, phidd, closed=None) 
             vadd(base[0], vscale(mul(sign, lam), d)),
             vadd(base[1], vscale(sign, vadd(vscale(lam_d, d), vscale(lam, d_dot)))),
             vadd(base[2], vscale(sign, slide_acc)),
-            _combine(base[3], _combine({k: d}, {j: vscale(mul(lam, v), dperp) for j, v in jt.items()}), sign),
+            _combine(
+                base[3],
+                _combine({k: d} if columns else {}, {j: vscale(mul(lam, v), dperp) for j, v in jt.items()}),
+                sign,
+            ),
         )
         rot = cos_sin(angle)
         local = local_point(lk, conn.slider if forward_slide else conn.guide)

@@ -11,25 +11,28 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .compiled import Model, as_model
 from .dynamics import gravity_forces, masses, terms
-from .forward import Centres, centres, forward, local_point
+from .forward import local_point
 from .fusion import compute_once
-from .kinematics import closure_residuals, closures, driver_motion, ideal_jets
+from .kinematics import driver_motion, ideal_motion
 from .linkage import GROUND, AbstractMechanism, BodyVector
+from .loops import closure_residuals
 from .safemath import (
     Jet,
     add,
     cos_sin,
     div,
+    known_zero,
+    ldl_solve,
     mul,
     neg,
     safe_norm,
-    solve_dense,
     sub,
     total,
     vadd,
@@ -38,7 +41,7 @@ from .safemath import (
     vturn,
 )
 from .state import scales
-from .topology import Placement
+from .topology import Dyad, Placement
 
 Mechanism = AbstractMechanism | Model
 
@@ -131,21 +134,19 @@ def ideal_kinematics(model: Mechanism, phi, phi_dot, phi_ddot) -> tuple[Array, A
     acceleration phi_ddot (rad/s^2)."""
     model = as_model(model)
     phi = jnp.asarray(phi, dtype=float)
-    c = _ideal_centres(model, ideal_jets(model, Jet(phi, 1.0, 0.0)), phi, phi_dot, phi_ddot, in_time=False)
-    return _stack(c.q), _stack(c.qd), _stack(c.qdd)
+    c = _ideal_centres(ideal_motion(model, Jet(phi, 1.0, 0.0))[1], phi_dot, phi_ddot, in_time=False)
+    return _stack(c[0]), _stack(c[1]), _stack(c[2])
 
 
-def _ideal_centres(model: Model, jets: list, phi, phi_dot, phi_ddot, in_time: bool) -> Centres:
-    """The ideal bodies' centres from the ideal coordinates' jets (in time, or in the driver
-    angle to be scaled by the driver's rates)."""
+def _ideal_centres(jets: list, phi_dot, phi_ddot, in_time: bool) -> tuple[list, list, list]:
+    """The ideal bodies' centre-of-mass poses and their first two time derivatives, from
+    their jets (in time, or in the driver angle to be scaled by the driver's rates)."""
     if in_time:
-        q, qd, qdd = [j.value for j in jets], [j.rate for j in jets], [j.second for j in jets]
-    else:
-        q = [j.value for j in jets]
-        qd = [mul(j.rate, phi_dot) for j in jets]
-        qdd = [add(mul(j.second, mul(phi_dot, phi_dot)), mul(j.rate, phi_ddot)) for j in jets]
-    lk, tree = model.linkage, model.tree
-    return centres(lk, tree, forward(lk, tree, q, qd, qdd, phi, phi_dot, phi_ddot, closures(model, phi)))
+        return [j.value for j in jets], [j.rate for j in jets], [j.second for j in jets]
+    q = [j.value for j in jets]
+    qd = [mul(j.rate, phi_dot) for j in jets]
+    qdd = [add(mul(j.second, mul(phi_dot, phi_dot)), mul(j.rate, phi_ddot)) for j in jets]
+    return q, qd, qdd
 
 
 def _closure_loads(model: Model, step, frames: dict, carried: dict, moment: dict) -> dict[str, tuple]:
@@ -176,7 +177,7 @@ def _closure_loads(model: Model, step, frames: dict, carried: dict, moment: dict
             for k in range(3):
                 a[3 * r + k][c] = w[k]
     b = [v for body in bodies for v in (*carried[body], moment[body])]
-    x = solve_dense(jnp.stack([_stack(row) for row in a]), _stack(b))
+    x = _dyad_loads(a, b) if isinstance(step, Dyad) else _least_squares(a, b)
     out = {}
     for i, j in enumerate(step.joints):
         conn = lk.connections[j]
@@ -189,6 +190,68 @@ def _closure_loads(model: Model, step, frames: dict, carried: dict, moment: dict
             carried[body] = vadd(carried[body], (load[0], load[1]))
             moment[body] = add(moment[body], load[2])
     return out
+
+
+def _solve2(a: list, b: list) -> list:
+    """x of the 2 x 2 system ``a x = b`` (scalars), by Cramer's rule."""
+    det = sub(mul(a[0][0], a[1][1]), mul(a[0][1], a[1][0]))
+    return [
+        div(sub(mul(a[1][1], b[0]), mul(a[0][1], b[1])), det),
+        div(sub(mul(a[0][0], b[1]), mul(a[1][0], b[0])), det),
+    ]
+
+
+def _dot3(u, v):
+    return total([mul(p, q) for p, q in zip(u, v)])
+
+
+def _dyad_loads(a: list, b: list) -> list:
+    """[`_least_squares`][] for a dyad's Newton-Euler equations (rows: the first body's
+    force and moment, then the second's; columns: the outer, middle and other joint's two
+    unknowns), by elimination: on each body, the combination of its three equations
+    that the unknowns of its joint to a placed body do not enter (the cross product of
+    their two columns: the moment about a pin, the force along a slide) gives one equation
+    in the middle joint's two unknowns; then each outer joint's pair from its body's
+    equations less the middle joint's load (2 x 2 normal equations)."""
+    col = [[[a[3 * body + r][c] for r in range(3)] for c in range(6)] for body in range(2)]
+    rhs = [b[0:3], b[3:6]]
+    own = ((0, 1), (4, 5))  # the outer joint's columns on the first body, the other joint's on the second
+    weights = []
+    for body in range(2):
+        p, q = (col[body][c] for c in own[body])
+        weights.append(
+            (
+                sub(mul(p[1], q[2]), mul(p[2], q[1])),
+                sub(mul(p[2], q[0]), mul(p[0], q[2])),
+                sub(mul(p[0], q[1]), mul(p[1], q[0])),
+            )
+        )
+    middle = _solve2(
+        [[_dot3(weights[body], col[body][c]) for c in (2, 3)] for body in range(2)],
+        [_dot3(weights[body], rhs[body]) for body in range(2)],
+    )
+    out = [None] * 6
+    out[2], out[3] = middle
+    for body in range(2):
+        left = [
+            sub(rhs[body][r], add(mul(col[body][2][r], middle[0]), mul(col[body][3][r], middle[1]))) for r in range(3)
+        ]
+        p, q = (col[body][c] for c in own[body])
+        pair = _solve2([[_dot3(p, p), _dot3(p, q)], [_dot3(q, p), _dot3(q, q)]], [_dot3(p, left), _dot3(q, left)])
+        out[own[body][0]], out[own[body][1]] = pair
+    return out
+
+
+def _least_squares(a: list, b: list) -> list:
+    """x of ``a x = b`` for a square, well-posed system written as scalars (the
+    Newton-Euler equations of a closure's bodies), by the normal equations
+    ``a^T a x = a^T b`` and an LDL^T factorisation without pivoting on the entries that
+    are not known to be zero: unrolled arithmetic, no row exchanges."""
+    n = len(a[0])
+    ata = [[total([mul(row[i], row[k]) for row in a]) for k in range(n)] for i in range(n)]
+    atb = [total([mul(row[i], v) for row, v in zip(a, b)]) for i in range(n)]
+    pattern = [[not known_zero(ata[i][k]) for k in range(n)] for i in range(n)]
+    return ldl_solve(lambda i, k: ata[i][k], atb, pattern)
 
 
 def _reactions(model: Model, frames: dict, q, mass, qdd, applied) -> dict[str, tuple]:
@@ -233,10 +296,10 @@ def _frame(model: Model, t, y) -> Frame:
         phi_ddot = driver_motion(model, t)[2]
     else:
         phi_ddot = qdd[3 * tree.bodies.index(lk.driver.body) + 2]
-    ideal = _ideal_centres(model, mo.ideal, phi, phi_dot, phi_ddot, in_time=lk.driver.prescribed)
+    ideal_q, ideal_qd, ideal_qdd = _ideal_centres(mo.ideal_centres, phi_dot, phi_ddot, in_time=lk.driver.prescribed)
     ideal_power = sub(
-        total([mul(mul(m, a), v) for m, a, v in zip(mass, ideal.qdd, ideal.qd)]),
-        total([mul(g, v) for g, v in zip(gravity, ideal.qd)]),
+        total([mul(mul(m, a), v) for m, a, v in zip(mass, ideal_qdd, ideal_qd)]),
+        total([mul(g, v) for g, v in zip(gravity, ideal_qd)]),
     )
     kinetic = mul(0.5, total([mul(m, mul(v, v)) for m, v in zip(mass, qd)]))
     potential = neg(total([mul(g, x) for g, x in zip(gravity, q)]))
@@ -269,14 +332,14 @@ def _frame(model: Model, t, y) -> Frame:
         q=_stack(q).reshape(nb, 3),
         qd=_stack(qd).reshape(nb, 3),
         qdd=_stack(qdd).reshape(nb, 3),
-        ideal_q=_stack(ideal.q).reshape(nb, 3),
-        ideal_qd=_stack(ideal.qd).reshape(nb, 3),
-        ideal_qdd=_stack(ideal.qdd).reshape(nb, 3),
+        ideal_q=_stack(ideal_q).reshape(nb, 3),
+        ideal_qd=_stack(ideal_qd).reshape(nb, 3),
+        ideal_qdd=_stack(ideal_qdd).reshape(nb, 3),
         **stacked,
         driving_moment=jnp.asarray(e.driving_moment, dtype=float),
         ideal_driving_moment=jnp.asarray(div(ideal_power, phi_dot), dtype=float),
         transmission_angle=transmission_angle(model, q),
-        ideal_transmission_angle=transmission_angle(model, ideal.q),
+        ideal_transmission_angle=transmission_angle(model, ideal_q),
         closure_residual=closure_residuals(model, q),
         kinetic_energy=jnp.asarray(kinetic, dtype=float),
         potential_energy=jnp.asarray(potential, dtype=float),
@@ -288,9 +351,14 @@ def _frame(model: Model, t, y) -> Frame:
 
 
 def evaluate(model: Mechanism, t: Float[ArrayLike, ""], y: Float[ArrayLike, " state"]) -> Frame:
-    """All physical quantities at time t (s) for scaled state y; also dy/dt."""
-    model = as_model(model)
+    """All physical quantities at time t (s) for scaled state y; also dy/dt.
+
+    Jitted (as [`jaxcrank.physics.dynamics.vector_field`][] is): a solve that evaluates the
+    frame in several places (the tracked metrics) traces it once."""
+    return _evaluate(jnp.asarray(t, dtype=float), jnp.asarray(y, dtype=float), as_model(model))
+
+
+@eqx.filter_jit
+def _evaluate(t, y, model: Model) -> Frame:
     _ = model.linkage  # written out here, outside the fused function: its numbers are inputs there
-    t = jnp.asarray(t, dtype=float)
-    y = jnp.asarray(y, dtype=float)
     return compute_once(lambda t_, y_: _frame(model, t_, y_), t, y)

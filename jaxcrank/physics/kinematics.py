@@ -24,14 +24,14 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from . import assembly, closure
+from . import closure, loops
 from .compiled import Model, as_model
-from .forward import GROUND_FRAME, Placed, centres, forward, local_point
+from .forward import Placed, centres, forward, local_point
 from .joints import JointAccelerations, JointKinematics
 from .linkage import GROUND, AbstractMechanism
 from .safemath import Jet, add, cos_sin, mul, stop_gradient, sub, vadd, vdot, vperp, vscale, vsub, vturn
 from .state import initial_state, state_scales, unpack
-from .topology import Dyad, Group, Plan
+from .topology import Dyad
 
 Mechanism = AbstractMechanism | Model
 
@@ -47,23 +47,23 @@ def ideal_frames(model: Model, phi) -> dict[str, Placed]:
     return closure.ideal_frames(model.linkage, model.plan, phi, model.signs, model.guesses)
 
 
-def closures(model: Model, phi):
+def closures(model: Model, phi, columns: bool = True):
     """The function that places the bodies of the tree's closure steps
-    ([`jaxcrank.physics.closure.closed_states`][]) for [`jaxcrank.physics.forward.forward`][]:
+    ([`jaxcrank.physics.loops.closed_states`][]) for [`jaxcrank.physics.forward.forward`][]:
     each dyad on the branch of the ideal mechanism, each group from the ideal mechanism's
-    poses at the driver angle ``phi`` (rad)."""
+    poses at the driver angle ``phi`` (rad); ``columns=False``: no Jacobian columns."""
     tree = model.tree
     signs = dict(zip([c for c in tree.closures if isinstance(c, Dyad)], model.tree_signs))
     guess_frames = {}
 
     def closed(step, states):
         if isinstance(step, Dyad):
-            return closure.closed_states(model.linkage, step, states, sign=signs[step])
+            return loops.closed_states(model.linkage, step, states, sign=signs[step], columns=columns)
         if not guess_frames:
             value = phi.value if isinstance(phi, Jet) else phi
             guess_frames.update(ideal_frames(model, stop_gradient(value)))
         guess = jnp.concatenate([guess_frames[b].pose() for b in step.bodies])
-        return closure.closed_states(model.linkage, step, states, guess=guess)
+        return loops.closed_states(model.linkage, step, states, guess=guess, columns=columns)
 
     return closed
 
@@ -124,48 +124,47 @@ def ideal_poses(model: Mechanism, phi: Float[ArrayLike, ""]) -> Float[Array, "bo
     return jnp.stack([frames[b].pose() for b in model.tree.bodies])
 
 
-def newton_poses(model: Mechanism, phi: Float[ArrayLike, ""]) -> Float[Array, "bodies 3"]:
-    """The same poses as [`ideal_poses`][jaxcrank.physics.kinematics.ideal_poses], every body
-    but the driven one placed together by one root find (no dyads), followed over the
-    turn from the bodies' ``guess`` poses: the reference the closed forms are tested
-    against. Every body needs a ``guess``."""
-    model = as_model(model)
-    lk, plan = model.linkage, model.plan
-    bodies = tuple(b for b in model.tree.bodies if b != plan.driven)
-    joints = tuple(j for j in model.tree.joints if j != plan.pivot)
-    group = Group(
-        bodies, joints, tuple(sorted({e for j in joints for e in model.structure.skeleton.ends(j)} - set(bodies)))
-    )
-    bare = Plan(plan.driven, plan.pivot, (group,))
-    frames = closure.ideal_frames(
-        lk, bare, jnp.asarray(phi, dtype=float), (), (assembly.group_guesses(lk, bare, group, ()),)
-    )
-    return jnp.stack([frames[b].pose() for b in model.tree.bodies])
-
-
 def ideal_coordinates(model: Mechanism, phi: Float[ArrayLike, ""]) -> Float[Array, " n"]:
     """Tree coordinates q_ideal of the ideal mechanism at driver angle phi (rad)."""
     model = as_model(model)
     return _stack(coordinates_of(model, ideal_frames(model, jnp.asarray(phi, dtype=float))))
 
 
-def ideal_jets(model: Model, phi: Jet) -> list[Jet]:
-    """The ideal tree coordinates as [`Jet`][jaxcrank.physics.safemath.Jet]s along the driver angle's jet
-    ``phi`` (its value and first two derivatives): the dyads' closed forms in one Taylor
-    pass; a plan with groups (root finds) by nested forward-mode autodiff."""
+def _centre_list(model: Model, frames: dict) -> list:
+    """Centre-of-mass poses (x, y, angle per body, flattened) of body frames, a list."""
+    lk, out = model.linkage, []
+    for b in model.tree.bodies:
+        centre = frames[b].point(lk.bodies[b].centre_of_mass.pair())
+        out += [centre[0], centre[1], frames[b].angle]
+    return out
+
+
+def ideal_motion(model: Model, phi: Jet) -> tuple[list[Jet], list[Jet]]:
+    """The ideal mechanism along the driver angle's jet ``phi`` (its value and first two
+    derivatives): its tree coordinates and its bodies' centre-of-mass poses Q (x, y,
+    angle per body, flattened) as [`Jet`][jaxcrank.physics.safemath.Jet]s. The dyads'
+    closed forms in one Taylor pass; a plan with groups (root finds) by nested forward-mode
+    autodiff."""
     if not any(s.kind == "group" for s in model.plan.steps):
-        return [Jet.of(v) for v in coordinates_of(model, ideal_frames(model, phi))]
+        frames = ideal_frames(model, phi)
+        return [Jet.of(v) for v in coordinates_of(model, frames)], [Jet.of(v) for v in _centre_list(model, frames)]
 
     def at(p):
-        return _stack(coordinates_of(model, ideal_frames(model, p)))
+        frames = ideal_frames(model, p)
+        return _stack([*coordinates_of(model, frames), *_centre_list(model, frames)])
 
     value = jnp.asarray(phi.value, dtype=float)
     one = jnp.ones_like(value)
     (q, dq), (_, d2q) = jax.jvp(lambda p: jax.jvp(at, (p,), (one,)), (value,), (one,))
     rate2 = mul(phi.rate, phi.rate)
-    return [
-        Jet(q[k], mul(dq[k], phi.rate), add(mul(d2q[k], rate2), mul(dq[k], phi.second))) for k in range(model.tree.n)
-    ]
+    jets = [Jet(q[k], mul(dq[k], phi.rate), add(mul(d2q[k], rate2), mul(dq[k], phi.second))) for k in range(q.shape[0])]
+    return jets[: model.tree.n], jets[model.tree.n :]
+
+
+def ideal_jets(model: Model, phi: Jet) -> list[Jet]:
+    """The ideal tree coordinates as [`Jet`][jaxcrank.physics.safemath.Jet]s along the driver
+    angle's jet ``phi`` ([`ideal_motion`][jaxcrank.physics.kinematics.ideal_motion])."""
+    return ideal_motion(model, phi)[0]
 
 
 def absolute_coordinates(model: Mechanism, s: Float[ArrayLike, " n"], t: Float[ArrayLike, ""]) -> tuple[Array, Array]:
@@ -230,8 +229,8 @@ class Motion(NamedTuple):
     structurally nonzero entries, ``J_phi`` = dQ/dphi at fixed tree coordinates as a dict
     row -> scalar (empty for a torque driver, whose angle is a coordinate), the bodies'
     [`BodyState`][jaxcrank.physics.forward.BodyState]s, the driver's angle and speed (rad, rad/s), and the
-    ideal tree coordinates as [`Jet`][jaxcrank.physics.safemath.Jet]s: in time for a prescribed driver, in
-    the driver angle for a torque driver."""
+    ideal tree coordinates and centre-of-mass poses as [`Jet`][jaxcrank.physics.safemath.Jet]s: in time
+    for a prescribed driver, in the driver angle for a torque driver."""
 
     q: list
     qd: list
@@ -242,6 +241,7 @@ class Motion(NamedTuple):
     driver_angle: object
     driver_speed: object
     ideal: list
+    ideal_centres: list
 
 
 def motion(model: Mechanism, s, sd, t) -> Motion:
@@ -260,7 +260,7 @@ def motion(model: Mechanism, s, sd, t) -> Motion:
     t = jnp.asarray(t, dtype=float)
     if lk.driver.prescribed:
         phi, phid, phidd = driver_motion(model, t)
-        ideal = ideal_jets(model, Jet(phi, phid, phidd))
+        ideal, ideal_centres = ideal_motion(model, Jet(phi, phid, phidd))
         q = [add(j.value, s[k]) for k, j in enumerate(ideal)]
         qd = [add(j.rate, sd[k]) for k, j in enumerate(ideal)]
         qdd = [j.second for j in ideal]
@@ -268,7 +268,7 @@ def motion(model: Mechanism, s, sd, t) -> Motion:
         omega = stop_gradient(lk.driver.speed_scale)
         phi = add(lk.driver.initial_angle, mul(omega, t)) + s[dc]
         phid, phidd = add(omega, sd[dc]), 0.0
-        ideal = ideal_jets(model, Jet(phi, 1.0, 0.0))  # derivatives in phi
+        ideal, ideal_centres = ideal_motion(model, Jet(phi, 1.0, 0.0))  # derivatives in phi
         q = [add(j.value, s[k]) for k, j in enumerate(ideal)]
         qd = [add(mul(j.rate, phid), sd[k]) for k, j in enumerate(ideal)]
         qdd = [mul(j.second, mul(phid, phid)) for j in ideal]
@@ -282,7 +282,7 @@ def motion(model: Mechanism, s, sd, t) -> Motion:
             if k != dc:
                 jac[(r, dc)] = add(jac.get((r, dc), 0.0), mul(v, ideal[k].rate))
         jac_phi = {}
-    return Motion(c.q, c.qd, c.qdd, jac, jac_phi, states, phi, phid, ideal)
+    return Motion(c.q, c.qd, c.qdd, jac, jac_phi, states, phi, phid, ideal, ideal_centres)
 
 
 def coordinates(
@@ -348,25 +348,6 @@ def joint_motion(
         _stack(ha), jnp.asarray(h_alpha, dtype=float), _stack(pa), jnp.asarray(p_alpha, dtype=float)
     )
     return kin, acc
-
-
-def closure_residuals(model: Mechanism, q) -> Array:
-    """Each ideal joint's closure residual for centre-of-mass poses Q (flattened), m: the
-    distance between its two points (a revolute joint), or of the slider point from the
-    guide's line (a prismatic joint); zero where the loops close exactly. In the order
-    of ``structure.ideal_joints``."""
-    model = as_model(model)
-    lk, tree = model.linkage, model.tree
-    frames = {GROUND: GROUND_FRAME}
-    for i, b in enumerate(tree.bodies):
-        rot = cos_sin(q[3 * i + 2])
-        com = vturn(rot, lk.bodies[b].centre_of_mass.pair())
-        frames[b] = Placed(vsub((q[3 * i], q[3 * i + 1]), com), q[3 * i + 2], rot)
-    out = []
-    for j in model.structure.ideal_joints:
-        conn = lk.connections[j]
-        out.append(conn.gap(closure.residuals(lk, frames, [j])))
-    return jnp.stack(out) if out else jnp.zeros(0)
 
 
 def joint_eccentricities(

@@ -34,16 +34,15 @@ from .compiled import Model, Structure, as_model, compile_model
 from .dynamics import Dynamics, dynamics, vector_field
 from .frame import Frame, evaluate
 from .kinematics import (
-    closure_residuals,
     coordinates,
     frame_poses,
     ideal_poses,
     joint_eccentricities,
     joint_motion,
-    newton_poses,
     positions,
     state_from_eccentricities,
 )
+from .loops import closure_residuals, newton_poses
 from .state import (
     State,
     auxiliary,

@@ -148,6 +148,8 @@ def sqrt(x):
     if isinstance(x, Jet):
         root = sqrt(x.value)
         rate = div(x.rate, mul(2.0, root))
+        if x.second is None:
+            return Jet(root, rate, None)
         return Jet(root, rate, div(sub(x.second, mul(2.0, mul(rate, rate))), mul(2.0, root)))
     if known(x):
         return math.sqrt(x)
@@ -161,6 +163,8 @@ def atan2(y, x):
         angle = atan2(y.value, x.value)
         r2 = add(mul(x.value, x.value), mul(y.value, y.value))
         rate = div(sub(mul(x.value, y.rate), mul(y.value, x.rate)), r2)
+        if x.second is None or y.second is None:
+            return Jet(angle, rate, None)
         along = div(add(mul(x.value, x.rate), mul(y.value, y.rate)), r2)
         second = sub(div(sub(mul(x.value, y.second), mul(y.value, x.second)), r2), mul(2.0, mul(rate, along)))
         return Jet(angle, rate, second)
@@ -173,6 +177,8 @@ def cos_sin(angle) -> tuple:
     """(cos angle, sin angle), each once ([`rotation`][jaxcrank.physics.safemath.rotation] for traced angles)."""
     if isinstance(angle, Jet):
         c, s = cos_sin(angle.value)
+        if angle.second is None:
+            return Jet(c, neg(mul(s, angle.rate)), None), Jet(s, mul(c, angle.rate), None)
         rate2 = mul(angle.rate, angle.rate)
         return (
             Jet(c, neg(mul(s, angle.rate)), sub(neg(mul(c, rate2)), mul(s, angle.second))),
@@ -194,7 +200,8 @@ def where(condition, a, b):
     """``a`` where ``condition``, else ``b`` (a condition known at trace time picks one)."""
     if isinstance(a, Jet) or isinstance(b, Jet):
         a, b = Jet.of(a), Jet.of(b)
-        return Jet(*(where(condition, u, v) for u, v in zip(a, b)))
+        second = None if a.second is None or b.second is None else where(condition, a.second, b.second)
+        return Jet(where(condition, a.value, b.value), where(condition, a.rate, b.rate), second)
     if isinstance(condition, (bool, np.bool_)):
         return a if condition else b
     return np.where(condition, a, b) if _on_numpy(condition, a, b) else jnp.where(condition, a, b)
@@ -202,7 +209,9 @@ def where(condition, a, b):
 
 class Jet:
     """A scalar with its first two derivatives along one parameter (time, in the
-    kinematics): ``(value, rate, second)``. Arithmetic and [`sqrt`][jaxcrank.physics.safemath.sqrt],
+    kinematics): ``(value, rate, second)``; ``second = None``: first derivatives only (the
+    rate may then be an array, derivatives along several directions at once). Arithmetic
+    and [`sqrt`][jaxcrank.physics.safemath.sqrt],
     [`atan2`][jaxcrank.physics.safemath.atan2], [`cos_sin`][jaxcrank.physics.safemath.cos_sin] propagate the
     derivatives by the chain rule in one pass (Taylor mode), so a closed form costs its
     value and two derivatives, not a derivative of a derivative. Comparisons look at the
@@ -222,28 +231,27 @@ class Jet:
 
     def __add__(self, other):
         o = Jet.of(other)
-        return Jet(add(self.value, o.value), add(self.rate, o.rate), add(self.second, o.second))
+        return Jet(add(self.value, o.value), add(self.rate, o.rate), _both(add, self.second, o.second))
 
     __radd__ = __add__
 
     def __sub__(self, other):
         o = Jet.of(other)
-        return Jet(sub(self.value, o.value), sub(self.rate, o.rate), sub(self.second, o.second))
+        return Jet(sub(self.value, o.value), sub(self.rate, o.rate), _both(sub, self.second, o.second))
 
     def __rsub__(self, other):
         return Jet.of(other) - self
 
     def __neg__(self):
-        return Jet(neg(self.value), neg(self.rate), neg(self.second))
+        return Jet(neg(self.value), neg(self.rate), None if self.second is None else neg(self.second))
 
     def __mul__(self, other):
         a, b = self, Jet.of(other)
+        rate = add(mul(a.value, b.rate), mul(a.rate, b.value))
+        if a.second is None or b.second is None:
+            return Jet(mul(a.value, b.value), rate, None)
         cross_term = mul(2.0, mul(a.rate, b.rate))
-        return Jet(
-            mul(a.value, b.value),
-            add(mul(a.value, b.rate), mul(a.rate, b.value)),
-            total([mul(a.value, b.second), cross_term, mul(a.second, b.value)]),
-        )
+        return Jet(mul(a.value, b.value), rate, total([mul(a.value, b.second), cross_term, mul(a.second, b.value)]))
 
     __rmul__ = __mul__
 
@@ -251,6 +259,8 @@ class Jet:
         a, b = self, Jet.of(other)
         value = div(a.value, b.value)
         rate = div(sub(a.rate, mul(value, b.rate)), b.value)
+        if a.second is None or b.second is None:
+            return Jet(value, rate, None)
         second = div(total([a.second, neg(mul(2.0, mul(rate, b.rate))), neg(mul(value, b.second))]), b.value)
         return Jet(value, rate, second)
 
@@ -259,6 +269,11 @@ class Jet:
 
     def __ge__(self, other):
         return self.value >= Jet.of(other).value
+
+
+def _both(op, a, b):
+    """``op(a, b)`` of two Jets' second derivatives; None (not tracked) where either is."""
+    return None if a is None or b is None else op(a, b)
 
 
 def stop_gradient(x):

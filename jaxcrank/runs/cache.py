@@ -23,6 +23,7 @@ import hashlib
 import importlib.metadata
 import os
 import pickle
+import sys
 import warnings
 from pathlib import Path
 
@@ -68,6 +69,31 @@ def enable(path: str | os.PathLike | None = None) -> Path | None:
     jax.config.update("jax_compilation_cache_dir", str(path))
     _folder = path
     return path
+
+
+def arguments(p) -> None:
+    """Add ``--cache-dir DIR`` and ``--no-cache`` to the argparse parser ``p`` of a command
+    that compiles programs ([`use`][jaxcrank.runs.cache.use] reads them back)."""
+    p.add_argument(
+        "--cache-dir",
+        type=Path,
+        default=None,
+        help="where compiled programs are kept between runs (default: $JAXCRANK_CACHE_DIR, else ~/.cache/jaxcrank/xla)",
+    )
+    p.add_argument("--no-cache", action="store_true", help="compile every program afresh and keep none")
+
+
+def use(args, command: str) -> Path | None:
+    """The cache of [`arguments`][jaxcrank.runs.cache.arguments], turned on unless ``--no-cache``
+    ([`enable`][jaxcrank.runs.cache.enable]); an unusable folder is reported on standard
+    error and the command goes on without a cache. Returns the folder in use, or None."""
+    if getattr(args, "no_cache", False):
+        return None
+    try:
+        return enable(getattr(args, "cache_dir", None))
+    except OSError as err:
+        print(f"jaxcrank {command}: no compilation cache ({err}); pass --cache-dir DIR or --no-cache", file=sys.stderr)
+        return None
 
 
 def folder() -> Path | None:
@@ -123,6 +149,13 @@ def _key(key, args) -> str | None:
     return hashlib.sha256(_environment() + spec).hexdigest()
 
 
+def stored(key, *args) -> bool:
+    """Whether the cache folder holds a traced program for ``key`` and the argument shapes
+    of ``args`` ([`exported`][jaxcrank.runs.cache.exported] would load it)."""
+    digest = None if _folder is None else _key(key, jax.tree_util.tree_leaves(args))
+    return digest is not None and (_folder / "exported" / f"{digest}.bin").exists()
+
+
 def exported(fun, key, *args):
     """``fun`` jitted, its trace loaded from the cache folder when an earlier process
     stored one under the same ``key`` and argument shapes, else traced now (under
@@ -139,7 +172,7 @@ def exported(fun, key, *args):
     holds a host callback (an inner jitted function this process traced before, outside
     [`checks_as_nan`][jaxcrank.runs.cache.checks_as_nan]) is not stored, only jitted.
     """
-    digest = None if _folder is None else _key(key, args)
+    digest = None if _folder is None else _key(key, jax.tree_util.tree_leaves(args))
     if digest is None:
         return _under_checks_as_nan(jax.jit(fun))
     path = _folder / "exported" / f"{digest}.bin"

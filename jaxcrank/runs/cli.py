@@ -9,9 +9,7 @@ A command's options are added, and JAX imported, only once the command is named:
 from __future__ import annotations
 
 import argparse
-import csv
 import json
-import platform
 import sys
 import time
 from pathlib import Path
@@ -27,153 +25,6 @@ COMMANDS = {
     "optimize": "minimise the RMS transmission-angle error (paper Eq. 19) or a design objective with optax",
     "assemble": "assemble a linkage at a driver angle: the poses, each dyad's branch, the lines that keep it",
 }
-
-
-def _simulate_parser(p):
-    """Add ``simulate``'s options to its parser ``p``."""
-    from ..numerics.solve import DEFAULTS, SOLVERS
-    from . import config
-
-    p.description = (
-        "Simulate a planar linkage with clearance joints (a preset, your own linkage from --config, or an "
-        "optimised design; the paper's offset slider-crank unless --mechanism/--config/--design say otherwise) "
-        "and write trajectory.csv, config.toml, summary.json and figures/ into --out."
-    )
-    config.add_mechanism_arguments(p, "simulate")
-    p.add_argument("--out", type=Path, default=Path("runs/paper"), help="run directory (default: runs/paper)")
-    p.add_argument("--t1", type=float, default=0.4, help="simulated time, s (default 0.4 = 4 revolutions at 600 rpm)")
-    p.add_argument(
-        "--samples-per-degree", type=float, default=10.0, help="output samples per degree of crank angle (default 10)"
-    )
-    p.add_argument(
-        "--solver",
-        choices=sorted(SOLVERS),
-        default=DEFAULTS.solver_name,
-        help=f"ODE solver (default {DEFAULTS.solver_name})",
-    )
-    p.add_argument(
-        "--rtol",
-        type=float,
-        default=DEFAULTS.rtol,
-        help=f"relative tolerance on the scaled state (default {DEFAULTS.rtol:g})",
-    )
-    p.add_argument(
-        "--atol",
-        type=float,
-        default=DEFAULTS.atol,
-        help=f"absolute tolerance on the scaled state (default {DEFAULTS.atol:g})",
-    )
-    p.add_argument(
-        "--max-steps", type=int, default=DEFAULTS.max_steps, help=f"solver step budget (default {DEFAULTS.max_steps})"
-    )
-    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    return p
-
-
-def run_simulate(args) -> int:
-    import math
-
-    import jax
-    import numpy as np
-
-    from ..analysis import outputs
-    from ..numerics import solve
-    from ..physics.params import ParameterError
-    from . import config, plots
-
-    mech = config.mechanism_from_arguments(args)
-    if args.t1 <= 0:
-        raise ParameterError(f"--t1 = {args.t1:g} s must be positive")
-    degrees = math.degrees(float(mech.speed) * args.t1)
-    n_samples = max(2, int(round(degrees * args.samples_per_degree)) + 1)
-
-    out = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    config.save(mech, out / "config.toml")
-
-    start = time.perf_counter()
-    options = solve.SolveOptions.from_text(solver=args.solver, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
-    # Metrics after the first revolution (the start-up impacts left out); a run that
-    # ends within it is summarised over its whole length, and says so.
-    period = float(mech.period)
-    after_first = args.t1 > period
-    sim = solve.simulate(
-        mech,
-        args.t1,
-        n_samples=n_samples,
-        options=options,
-        progress=not args.quiet,
-        metrics_start=period if after_first else 0.0,
-    )
-    jax.block_until_ready(sim.ys)
-    wall = time.perf_counter() - start
-    cols = outputs.trajectory(sim)
-    units = outputs.columns(mech)
-
-    with open(out / "trajectory.csv", "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(list(units))
-        for row in zip(*(cols[k] for k in units)):
-            writer.writerow([f"{v:.10g}" for v in row])
-
-    metrics = {**outputs.summary_metrics(sim), "window_end_s": float(cols["t"][-1])}
-    window = _window_label(metrics, period)
-    i0 = int(np.searchsorted(cols["t"], metrics["window_start_s"]))
-    summary = {
-        "jaxcrank_version": __version__,
-        "versions": _versions(),
-        "solver": {
-            "name": args.solver,
-            "rtol": args.rtol,
-            "atol": args.atol,
-            "steps": int(sim.num_steps),
-            "rejected_steps": int(sim.num_rejected),
-            "result": "successful",
-        },
-        "wall_time_s": wall,
-        "wall_time_includes": "compilation, solve, progress bar",
-        "simulated_time_s": args.t1,
-        "samples": n_samples,
-        "metrics_window": window,
-        "metrics": metrics,
-        "energy_balance": {
-            "from_s": float(cols["t"][i0]),
-            "to_s": float(cols["t"][-1]),
-            **outputs.energy_balance(cols, i0=i0),
-        },
-        "closure_residual_max_m": outputs.closure_residual(sim),
-        "mechanism": mech.linkage().name,
-        "units": units,
-    }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    if not args.no_figures:
-        plots.save_figures(cols, mech, out / "figures")
-    print(f"wrote {out}/ (trajectory.csv, config.toml, summary.json{'' if args.no_figures else ', figures/'})")
-    print(f"  {int(sim.num_steps)} steps ({int(sim.num_rejected)} rejected) in {wall:.1f} s")
-    print(f"  {window}: {_headline_text(summary['metrics'])}")
-    return 0
-
-
-def _headline_text(metrics: dict) -> str:
-    """The largest deviations and the RMS transmission-angle error, in words."""
-    parts = []
-    for name, value in metrics.items():
-        if name.startswith("max_abs_") and name.endswith("_deviation_m"):
-            parts.append(f"max |{name[8:-12].replace('_', ' ')} dev| = {value * 1e3:.3f} mm")
-        elif name.startswith("max_abs_") and name.endswith("_angle_deviation_deg"):
-            parts.append(f"max |{name[8:-14].replace('_', ' ')} dev| = {value:.4f} deg")
-    if "rms_transmission_angle_error_deg" in metrics:
-        parts.append(f"RMS transmission-angle error = {metrics['rms_transmission_angle_error_deg']:.4f} deg")
-    return ", ".join(parts)
-
-
-def _window_label(metrics: dict, period: float) -> str:
-    """What the metrics window of [`jaxcrank.analysis.outputs.summary_metrics`][] was, in words."""
-    start, end = metrics["window_start_s"], metrics["window_end_s"]
-    if start == 0.0:
-        return f"over the whole run, 0 to {end:g} s (shorter than one revolution, {period:g} s)"
-    return f"after the first revolution ({start:g} to {end:g} s)"
 
 
 SWEEP_SPEC_HELP = """\
@@ -251,6 +102,9 @@ def _sweep_parser(p):
         "xla: the compiled JAX solve (every solver)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from . import cache
+
+    cache.arguments(p)
     return p
 
 
@@ -258,9 +112,10 @@ def run_sweep(args) -> int:
     import jax
 
     from ..analysis import metrics
-    from . import config, engines, plots, sweep
+    from . import cache, config, engines, plots, simulate_cli, sweep
     from . import spec as spec_module
 
+    cache.use(args, "sweep")
     if args.distributed or args.coordinator:
         jax.distributed.initialize(
             coordinator_address=args.coordinator, num_processes=args.num_processes, process_id=args.process_id
@@ -304,7 +159,7 @@ def run_sweep(args) -> int:
             "chunk": chunk,
             "engine": engine,
             "settings": spec.settings.to_text(),
-            "versions": _versions(),
+            "versions": simulate_cli.versions(),
             "mechanism": spec.base.linkage().name,
             "metric_meanings": metrics.meanings(spec.base),
         }
@@ -320,24 +175,6 @@ def run_sweep(args) -> int:
     return 0
 
 
-def _versions():
-    import diffrax
-    import equinox
-    import jax
-    import numpy
-
-    from ..numerics import runtime
-
-    return {
-        "python": platform.python_version(),
-        "jax": jax.__version__,
-        "diffrax": diffrax.__version__,
-        "equinox": equinox.__version__,
-        "numpy": numpy.__version__,
-        "xla": runtime.describe(),
-    }
-
-
 def parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``jaxcrank`` argument parser; only ``command``'s options are added (the others'
     subparsers carry their one-line help), so that naming no command imports no JAX."""
@@ -349,7 +186,9 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
         if name != command:
             continue
         if name == "simulate":
-            _simulate_parser(p)
+            from . import simulate_cli
+
+            simulate_cli.add_arguments(p)
         elif name == "sweep":
             _sweep_parser(p)
         elif name == "steady":
@@ -386,7 +225,9 @@ def main(argv=None) -> int:
 
     try:
         if args.command == "simulate":
-            return run_simulate(args)
+            from . import simulate_cli
+
+            return simulate_cli.run(args)
         if args.command == "sweep":
             return run_sweep(args)
         if args.command == "steady":

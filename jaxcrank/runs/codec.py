@@ -17,6 +17,7 @@ in its registry.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import equinox as eqx
 import numpy as np
@@ -139,7 +140,10 @@ def _number(value, path):
 def _pair(value, n, path):
     if not (isinstance(value, (list, tuple)) and len(value) == n):
         raise ParameterError(f"{_where(path)} must be a list of {n} numbers, got {value!r}")
-    return [_number(v, path) for v in value]
+    numbers = [_number(v, path) for v in value]
+    if not all(math.isfinite(v) for v in numbers):
+        raise ParameterError(f"{_where(path)} must be a list of {n} finite numbers, got {value!r}")
+    return numbers
 
 
 def _registry_for(template):

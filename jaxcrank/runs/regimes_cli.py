@@ -67,6 +67,9 @@ def add_arguments(p):
     p.add_argument("--threads", type=int, help="kernel threads (default: the CPUs this process may use)")
     p.add_argument("--no-figures", action="store_true", help="skip regime_map.png")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    from . import cache
+
+    cache.arguments(p)
     return p
 
 
@@ -138,7 +141,9 @@ def regime_map(table, mech, names, path: Path) -> Path:
 
 
 def run(args) -> int:
-    from . import config, regimes
+    from . import cache, config, regimes
+
+    cache.use(args, "regimes")
 
     config.check_resume(args.out, args.resume)
     spec, options = load(args.spec, args)

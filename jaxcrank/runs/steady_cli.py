@@ -40,6 +40,9 @@ def add_arguments(p):
     p.add_argument("--max-steps", type=int, default=STEADY_DEFAULTS.max_steps, help="step budget per solve (2000000)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress on standard error")
+    from . import cache
+
+    cache.arguments(p)
     return p
 
 
@@ -159,8 +162,10 @@ def summary(steady, wall: float, args) -> dict:
 def run(args) -> int:
     from ..analysis import outputs
     from ..numerics.steady import steady_state
-    from . import plots
-    from .cli import _headline_text
+    from . import cache, plots
+    from .simulate_cli import headline_text
+
+    cache.use(args, "steady")
 
     mech = config.mechanism_from_arguments(args)
     if not (args.newton_tol > 0):
@@ -210,7 +215,7 @@ def run(args) -> int:
         + f"; |Floquet multipliers| {mods}; Lyapunov exponent {data['lyapunov_exponent_per_s']:.3g} 1/s; "
         f"{wall:.1f} s"
     )
-    headline = _headline_text(data["metrics"])
+    headline = headline_text(data["metrics"])
     if headline:
         print(f"  {data['metrics_window']}: {headline}")
     return 0
