@@ -12,8 +12,9 @@ of its standard error.
 
 Speed, both codes in the same run, on one pinned core: the paper solve (0.4 s, 14401
 samples, metrics after 0.1 s) compiled with the mechanism's numbers as constants, the
-best of five after compilation, per solver step (this code also with the numbers as the
-program's inputs, as its command line compiles them); and the paper run as a user runs it,
+least of seven rounds that take the codes in turn, after compilation, per solver step
+(this code also with the numbers as the program's inputs, as its command line compiles
+them); and the paper run as a user runs it,
 ``jaxcrank simulate --no-figures --quiet`` in ``--repeats`` fresh processes of each code
 taken in turn (this code with no cache, with its cache warm, and with
 ``--fold-parameters``), the processes' wall times and the solve phases their summaries
@@ -72,20 +73,30 @@ def _run(package, perturbation: float):
     return {k: np.asarray(cols[k]) for k in ["t", *COLUMNS]}, {k: float(v) for k, v in sim.metrics.items()}
 
 
-def _solve_cost(package, values: bool) -> dict:
-    """The paper solve's best wall time of five after compilation, and per solver step."""
+def _solve_costs(variants: dict, rounds: int = 7) -> dict:
+    """Per variant (``name: (package, values)``), the paper solve's least wall time after
+    compilation over ``rounds`` rounds that take the variants in turn (so that a change of
+    the machine's speed touches every variant alike), and per solver step."""
     import jax
     import jax.numpy as jnp
 
-    mech = package.paper()
-    if values:
-        mech = package.solve.as_values(mech)
     ts = np.asarray(jnp.linspace(0.0, 0.4, 14401))
-    run = jax.jit(lambda m: package.simulate(m, ts=ts, metrics_start=0.1, throw=False))
-    sim = jax.block_until_ready(run(mech))
-    best = min(_wall(lambda: jax.block_until_ready(run(mech))) for _ in range(5))
-    steps = int(sim.num_steps) + int(sim.num_rejected)
-    return {"best_s": best, "steps_incl_rejected": steps, "us_per_step": best / steps * 1e6}
+    prepared = {}
+    for name, (package, values) in variants.items():
+        mech = package.paper()
+        if values:
+            mech = package.solve.as_values(mech)
+        run = jax.jit(lambda m, package=package: package.simulate(m, ts=ts, metrics_start=0.1, throw=False))
+        sim = jax.block_until_ready(run(mech))
+        prepared[name] = (run, mech, int(sim.num_steps) + int(sim.num_rejected))
+    best = {name: float("inf") for name in variants}
+    for _ in range(rounds):
+        for name, (run, mech, _) in prepared.items():
+            best[name] = min(best[name], _wall(lambda run=run, mech=mech: jax.block_until_ready(run(mech))))
+    return {
+        name: {"best_s": best[name], "steps_incl_rejected": steps, "us_per_step": best[name] / steps * 1e6}
+        for name, (_, _, steps) in prepared.items()
+    }
 
 
 def _wall(fn) -> float:
@@ -188,11 +199,13 @@ def main(argv=None) -> int:
             for k in range(max(args.starts, 2)):
                 runs[(name, k * PERTURBATION)] = _run(package, k * PERTURBATION)
                 spread[name].append(runs[(name, k * PERTURBATION)][1])
-        solve_cost = {
-            "base_constants": _solve_cost(jaxcrank_base, values=False),
-            "this_constants": _solve_cost(jaxcrank, values=False),
-            "this_values": _solve_cost(jaxcrank, values=True),
-        }
+        solve_cost = _solve_costs(
+            {
+                "base_constants": (jaxcrank_base, False),
+                "this_constants": (jaxcrank, False),
+                "this_values": (jaxcrank, True),
+            }
+        )
         for name in ("this_constants", "this_values"):
             solve_cost[f"{name}_over_base"] = (
                 solve_cost[name]["us_per_step"] / solve_cost["base_constants"]["us_per_step"]

@@ -722,6 +722,16 @@ def headline() -> str:
             "`gradient.json`",
         ],
     ]
+    c = results("compile")["summary"]
+    rows.append(
+        [
+            "`jaxcrank simulate` compile, cold: paper / slowest preset or docs linkage; warm (cache, a --set variant),"
+            " slowest",
+            f"{fmt(c['paper_cold_compile_s'])} s / {ratio(c['worst_cold']['over_paper'])} "
+            f"({c['worst_cold']['mechanism']}); {fmt(c['worst_warm']['compile_s'])} s",
+            "`compile.json`",
+        ]
+    )
     rows.append(design_headline(results("design")))
     return table(["measured (one CPU core unless noted)", "value", "bench/results/"], rows)
 
@@ -747,7 +757,88 @@ def table_tracking() -> str:
     return cost + "\n" + peaks + "\n" + memory + source("tracking") + note
 
 
+def table_compile() -> str:
+    """Cold and warm compile of ``jaxcrank simulate`` for every preset and the docs' linkages."""
+    d = results("compile")
+    paper = d["summary"]["paper_cold_compile_s"]
+    rows = [
+        [
+            name,
+            r["cold"]["compile_s"],
+            ratio(r["cold_over_paper"]) if name != "paper" else "1x",
+            r["warm"]["compile_s"],
+            r["cold"]["process_s"],
+            r["warm"]["process_s"],
+        ]
+        for name, r in d["mechanisms"].items()
+    ]
+    body = table(
+        [
+            "mechanism",
+            "cold: compile (s)",
+            "over the paper's",
+            "warm: load (s)",
+            "cold: whole command (s)",
+            "warm: whole command (s)",
+        ],
+        rows,
+    )
+    s = d["summary"]
+    note = (
+        f"\nThe paper preset's cold compile: {fmt(paper)} s. Every cold compile within 2x of it: "
+        f"{fmt(s['cold_within_2x_paper'])} (the largest, {s['worst_cold']['mechanism']}: "
+        f"{ratio(s['worst_cold']['over_paper'])}); every warm start within 2 s: {fmt(s['warm_within_2_s'])} "
+        f"(the longest, {s['worst_warm']['mechanism']}: {fmt(s['worst_warm']['compile_s'])} s).\n"
+    )
+    return body + note + source("compile")
+
+
+def table_paper_equivalence() -> str:
+    """The paper run against the earlier commit: first-millisecond agreement, metrics over starts, speed."""
+    d = results("paper_equivalence")
+    first = d["relative_difference_first_ms_this_vs_base"]
+    agree = table(
+        ["column", "largest difference over the first ms / largest value"], [[k, v] for k, v in first.items()]
+    )
+    stats = table(
+        ["metric (after 0.1 s)", "this: mean", "this: std", "earlier: mean", "earlier: std", "difference / s.e."],
+        [
+            [k, v["this_mean"], v["this_std"], v["base_mean"], v["base_std"], v["difference_over_standard_error"]]
+            for k, v in d["metrics_over_starts"].items()
+        ],
+    )
+    c = d["solve_cost"]
+    cost = table(
+        ["paper solve, after compile", "us per step", "over the earlier commit's"],
+        [
+            ["earlier commit, numbers compiled in", c["base_constants"]["us_per_step"], "1x"],
+            [
+                "this commit, numbers compiled in",
+                c["this_constants"]["us_per_step"],
+                f"{c['this_constants_over_base']:.3f}",
+            ],
+            ["this commit, numbers as inputs", c["this_values"]["us_per_step"], f"{c['this_values_over_base']:.3f}"],
+        ],
+    )
+    out = agree + "\n" + stats + "\n" + cost
+    cli = d.get("command_line")
+    if cli:
+        names = {
+            "base": "earlier commit",
+            "this_no_cache": "this commit, --no-cache",
+            "this_warm_cache": "this commit, cache warm",
+            "this_fold_parameters": "this commit, --no-cache --fold-parameters",
+        }
+        out += "\n" + table(
+            ["jaxcrank simulate (paper defaults, --no-figures)", "median process (s)", "over the earlier commit's"],
+            [[names[k], v, f"{cli['median_process_over_base'][k]:.3f}"] for k, v in cli["median_process_s"].items()],
+        )
+    return out + "\n*The earlier commit and this one are named in the JSON file.*\n" + source("paper_equivalence")
+
+
 TABLES = {
+    "compile": table_compile,
+    "paper_equivalence": table_paper_equivalence,
     "tracking": table_tracking,
     "solvers": table_solvers,
     "gradient": table_gradient,

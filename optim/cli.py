@@ -183,8 +183,7 @@ def build(cfg) -> tuple[Problem, Settings]:
             raise ParameterError(f"[design] variables: only the design problem takes it, not {name!r}")
         kwargs["variables"] = tuple(design.pop("variables"))
     problem = PROBLEMS[name](**kwargs)
-    if "mechanism" in cfg:
-        problem = dataclasses.replace(problem, base=mech_config.from_dict(cfg["mechanism"]))
+    changes = {"base": mech_config.from_dict(cfg["mechanism"])} if "mechanism" in cfg else {}
     if design:
         design = _fields(type(problem), "design", design)
         design = {
@@ -197,7 +196,8 @@ def build(cfg) -> tuple[Problem, Settings]:
             )
             for k, v in design.items()
         }
-        problem = dataclasses.replace(problem, **design)
+    if changes or design:  # one replacement: the new base checked against the new variables
+        problem = dataclasses.replace(problem, **changes, **design)
     section = dict(cfg.get("optimizer", {}))
     if not isinstance(problem.objective, Steady):
         return problem, settings_from_config(section)

@@ -212,9 +212,9 @@ def test_gradients_through_the_relaxation_match_the_closed_form():
     [
         ("v_ref", 0.0, r"v_ref = 0 m/s is outside its valid range \(0, inf\)"),
         ("tau", -1.0, r"tau = -1 s is outside its valid range \(0, inf\)"),
-        ("t_dwell", float("nan"), r"t_dwell = nan s is outside its valid range \(0, inf\)"),
+        ("t_dwell", float("nan"), r"t_dwell = nan s must be a finite number in \(0, inf\)"),
         ("gate_width", 0.0, r"gate_width = 0 s is outside its valid range \(0, inf\)"),
-        ("min_approach_speed", float("inf"), r"min_approach_speed = inf m/s is outside its valid range"),
+        ("min_approach_speed", float("inf"), r"min_approach_speed = inf m/s must be a finite number in \(0, inf\)"),
         ("v_ref", 1e-4, r"v_ref = 0.0001 m/s must not be below min_approach_speed = 0.001 m/s"),
     ],
 )

@@ -249,8 +249,8 @@ def as_values(mech: Mechanism) -> Mechanism:
     (a point on a body's axis, a driver starting at angle 0): known at trace time, they
     cost no operation ([`jaxcrank.physics.safemath`][]), and a design that makes one
     nonzero has a program of its own. [`simulate`][jaxcrank.numerics.solve.simulate] of a
-    mechanism of plain numbers compiles them in as constants, which XLA folds: a solver
-    step costs about a fifth less (the paper run), and every design compiles anew."""
+    mechanism of plain numbers compiles them in as constants, which XLA can fold, and
+    every design compiles anew."""
 
     def value(leaf):
         if isinstance(leaf, (float, np.floating)) and leaf != 0.0:

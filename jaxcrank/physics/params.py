@@ -54,6 +54,9 @@ def check_range(name: str, value, *, low=None, high=None, low_open=True, high_op
         hi = "inf" if high is None else f"{high:g}"
         interval = f"{'(' if low_open or low is None else '['}{lo}, {hi}{')' if high_open or high is None else ']'}"
         bad = arr[~ok].ravel()[0] if arr.ndim else arr
+        finite = "a finite number" if low is None and high is None else f"a finite number in {interval}"
+        if not np.isfinite(bad) or (low is None and high is None):
+            raise ParameterError(f"{name} = {bad:g}{' ' + unit if unit else ''} must be {finite}")
         raise ParameterError(f"{name} = {bad:g}{' ' + unit if unit else ''} is outside its valid range {interval}")
 
 

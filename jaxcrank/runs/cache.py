@@ -71,6 +71,14 @@ def enable(path: str | os.PathLike | None = None) -> Path | None:
     return path
 
 
+def disable() -> None:
+    """Turn off this module's store of traced programs for the rest of the process, and
+    JAX's compilation cache for the compilations JAX has not yet looked up in it."""
+    global _folder
+    _folder = None
+    jax.config.update("jax_compilation_cache_dir", None)
+
+
 def arguments(p) -> None:
     """Add ``--cache-dir DIR`` and ``--no-cache`` to the argparse parser ``p`` of a command
     that compiles programs ([`use`][jaxcrank.runs.cache.use] reads them back)."""
@@ -84,10 +92,12 @@ def arguments(p) -> None:
 
 
 def use(args, command: str) -> Path | None:
-    """The cache of [`arguments`][jaxcrank.runs.cache.arguments], turned on unless ``--no-cache``
-    ([`enable`][jaxcrank.runs.cache.enable]); an unusable folder is reported on standard
+    """The cache of [`arguments`][jaxcrank.runs.cache.arguments]: turned on
+    ([`enable`][jaxcrank.runs.cache.enable]), or off with ``--no-cache``
+    ([`disable`][jaxcrank.runs.cache.disable]); an unusable folder is reported on standard
     error and the command goes on without a cache. Returns the folder in use, or None."""
     if getattr(args, "no_cache", False):
+        disable()
         return None
     try:
         return enable(getattr(args, "cache_dir", None))

@@ -98,8 +98,8 @@ def simulate(
     the stored program where the cache folder holds one (or the one this process compiled
     last); phases shown on standard error (``label`` names the solve's phase). The
     mechanism's numbers are the program's inputs, so every design of its structure shares
-    the program; ``fold``: they are compiled in as constants instead (a solver step about a
-    fifth cheaper on the paper run; a program per design).
+    the program; ``fold``: they are compiled in as constants instead, which XLA can fold
+    (a program per design).
 
     Returns:
         ``(simulation, seconds)``: the [`Simulation`][jaxcrank.numerics.solve.Simulation]
@@ -139,8 +139,13 @@ def simulate(
     program, loaded, seconds = _COMPILED.get(key, (None, True, 0.0))
     if program is None:
         loaded = cache.stored(key, *args)
-        label = "loading the compiled solve from the cache" if loaded else "compiling this linkage's solve (first run)"
-        with Phase(label, quiet) as compiling:
+        if loaded:
+            doing = "loading the compiled solve from the cache"
+        elif cache.folder() is not None:
+            doing = "compiling this linkage's solve (first run; later runs load it from the cache)"
+        else:
+            doing = "compiling this linkage's solve (no cache: --no-cache)"
+        with Phase(doing, quiet) as compiling:
             program = cache.exported(run, key, *args).lower(*args).compile()
         seconds = compiling.seconds
         _COMPILED.clear()  # the last program only: a rerun of the same run (a new window) reuses it

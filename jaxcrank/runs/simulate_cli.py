@@ -56,8 +56,8 @@ def add_arguments(p):
     p.add_argument(
         "--fold-parameters",
         action="store_true",
-        help="compile the mechanism's numbers into the solve as constants: each solver step is cheaper "
-        "(about a fifth, on the paper run), but every --set variant compiles its own program (long runs)",
+        help="compile the mechanism's numbers into the solve as constants, which XLA can fold (for a long "
+        "run of one design); every --set variant then compiles its own program",
     )
     p.add_argument(
         "--progress",
