@@ -14,7 +14,8 @@ Speed, both codes in the same run, on one pinned core: the paper solve (0.4 s, 1
 samples, metrics after 0.1 s) compiled with the mechanism's numbers as constants, the
 least of seven rounds that take the codes in turn, after compilation, per solver step
 (this code also with the numbers as the program's inputs, as its command line compiles
-them); and the paper run as a user runs it,
+them), in ``--processes`` fresh processes (the speed of a compiled program varies from
+one process to the next) and their median; and the paper run as a user runs it,
 ``jaxcrank simulate --no-figures --quiet`` in ``--repeats`` fresh processes of each code
 taken in turn (this code with no cache, with its cache warm, and with
 ``--fold-parameters``), the processes' wall times and the solve phases their summaries
@@ -99,6 +100,28 @@ def _solve_costs(variants: dict, rounds: int = 7) -> dict:
     }
 
 
+VARIANTS = {"base_constants": ("jaxcrank_base", False), "this_constants": ("jaxcrank", False),
+            "this_values": ("jaxcrank", True)}  # fmt: skip
+
+
+def _solve_costs_in_processes(pkg_path: Path, processes: int, core: int) -> dict:
+    """[`_solve_costs`] of the three variants in ``processes`` fresh processes (a program's
+    speed varies from one compilation and process to the next): each process's numbers,
+    and per variant the median over processes of its least time per step."""
+    env = dict(os.environ, PYTHONPATH=f"{ROOT}{os.pathsep}{pkg_path}")
+    per_process = []
+    for _ in range(processes):
+        cmd = ["taskset", "-c", str(core), sys.executable, str(Path(__file__).resolve()), "--solve-cost-only"]
+        done = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True)
+        per_process.append(json.loads(done.stdout.strip().splitlines()[-1]))
+    median = {name: float(np.median([p[name]["us_per_step"] for p in per_process])) for name in VARIANTS}
+    return {
+        "processes": per_process,
+        "median_us_per_step": median,
+        "median_over_base": {name: median[name] / median["base_constants"] for name in VARIANTS},
+    }
+
+
 def _wall(fn) -> float:
     start = time.perf_counter()
     fn()
@@ -137,10 +160,16 @@ def _cli_runs(pkg_path: Path, repeats: int, core: int) -> dict:
                     )
                 runs[name].append(row)
     medians = {name: float(np.median([r["process_s"] for r in rows])) for name, rows in runs.items()}
+    solve = {
+        name: float(np.median([r["solve_us_per_step"] for r in rows]))
+        for name, rows in runs.items()
+        if rows and "solve_us_per_step" in rows[0]
+    }
     return {
         "repeats": repeats,
         "runs": runs,
         "median_process_s": medians,
+        "median_solve_us_per_step": solve,
         "median_process_over_base": {name: m / medians["base"] for name, m in medians.items()},
     }
 
@@ -184,8 +213,15 @@ def main(argv=None) -> int:
     p.add_argument("--starts", type=int, default=8, help="starts per code for the metrics' spread (>= 2)")
     p.add_argument("--repeats", type=int, default=3, help="fresh command-line processes per code (0: none)")
     p.add_argument("--core", type=int, default=0, help="the CPU core everything is pinned to")
+    p.add_argument("--processes", type=int, default=5, help="fresh processes that each time the three solves")
+    p.add_argument("--solve-cost-only", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "paper_equivalence.json")
     args = p.parse_args(argv)
+    if args.solve_cost_only:  # one process of _solve_costs_in_processes: the packages are on PYTHONPATH
+        import importlib
+
+        print(json.dumps(_solve_costs({k: (importlib.import_module(m), v) for k, (m, v) in VARIANTS.items()})))
+        return 0
     with tempfile.TemporaryDirectory() as tmp:
         _base_package(args.base, Path(tmp))
         sys.path.insert(0, str(Path(tmp) / "pkg"))
@@ -199,24 +235,14 @@ def main(argv=None) -> int:
             for k in range(max(args.starts, 2)):
                 runs[(name, k * PERTURBATION)] = _run(package, k * PERTURBATION)
                 spread[name].append(runs[(name, k * PERTURBATION)][1])
-        solve_cost = _solve_costs(
-            {
-                "base_constants": (jaxcrank_base, False),
-                "this_constants": (jaxcrank, False),
-                "this_values": (jaxcrank, True),
-            }
-        )
-        for name in ("this_constants", "this_values"):
-            solve_cost[f"{name}_over_base"] = (
-                solve_cost[name]["us_per_step"] / solve_cost["base_constants"]["us_per_step"]
-            )
+        solve_cost = _solve_costs_in_processes(Path(tmp) / "pkg", args.processes, args.core)
         cli_runs = _cli_runs(Path(tmp) / "pkg", args.repeats, args.core) if args.repeats > 0 else None
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
     metrics = {name: runs[(name, 0.0)][1] for name in ("this", "base")}
     metrics.update({f"{name}_perturbed": runs[(name, PERTURBATION)][1] for name in ("this", "base")})
     result = {
         "command": f"python bench/paper_equivalence.py --base {args.base} --starts {args.starts} "
-        f"--repeats {args.repeats}",
+        f"--repeats {args.repeats} --processes {args.processes}",
         "this_commit": head,
         "base_commit": args.base,
         "machine": platform.processor() or platform.machine(),
