@@ -809,9 +809,9 @@ def table_paper_equivalence() -> str:
     )
     c = d["solve_cost"]
     labels = {
-        "base_constants": "earlier commit, numbers compiled in",
+        "base_constants": "earlier commit, numbers compiled in (its command line's program)",
         "this_constants": "this commit, numbers compiled in",
-        "this_values": "this commit, numbers as inputs (the command line's program)",
+        "this_values": "this commit, numbers as inputs (its command line's program)",
     }
     cost = table(
         [
