@@ -74,9 +74,21 @@ def _split(mech, fold: bool = False):
     from ..numerics.solve import as_values
 
     leaves, treedef = jax.tree_util.tree_flatten(mech if fold else as_values(mech))
-    dynamic = [i for i, leaf in enumerate(leaves) if isinstance(leaf, jax.Array)]
-    static = tuple(None if i in dynamic else leaf for i, leaf in enumerate(leaves))
-    return [leaves[i] for i in dynamic], (treedef, static, tuple(dynamic))
+    dynamic = tuple(i for i, leaf in enumerate(leaves) if isinstance(leaf, jax.Array))
+    static = tuple(None if isinstance(leaf, jax.Array) else leaf for leaf in leaves)
+    return [leaves[i] for i in dynamic], (treedef, static, dynamic)
+
+
+def _join(values, program):
+    """The mechanism ``_split`` took apart: ``values`` put
+    back into ``program``'s ``(treedef, static, dynamic)``."""
+    import jax
+
+    treedef, static, dynamic = program
+    leaves = list(static)
+    for i, v in zip(dynamic, values):
+        leaves[i] = v
+    return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
 _COMPILED: dict = {}  # the last compiled solve of this process, by its key
@@ -123,11 +135,8 @@ def simulate(
     key += (options.dt0, options.max_steps, int(n_samples))
 
     def run(values, ts, metrics_start):
-        leaves = list(static)
-        for i, v in zip(dynamic, values):
-            leaves[i] = v
         sim = solve.simulate(
-            jax.tree_util.tree_unflatten(treedef, leaves),
+            _join(values, (treedef, static, dynamic)),
             ts=ts,
             options=options,
             metrics_start=metrics_start,
@@ -175,10 +184,7 @@ def frames(sim, *, quiet: bool = False):
     key = ("jaxcrank.frames", treedef, static, dynamic)
 
     def run(values, ts, ys):
-        leaves = list(static)
-        for i, v in zip(dynamic, values):
-            leaves[i] = v
-        compiled = model.compile_model(jax.tree_util.tree_unflatten(treedef, leaves))
+        compiled = model.compile_model(_join(values, (treedef, static, dynamic)))
         return tuple(jax.vmap(model.evaluate, in_axes=(None, 0, 0))(compiled, ts, ys))  # a tuple: stored as is
 
     args = (values, sim.ts, sim.ys)
