@@ -1,6 +1,6 @@
 """jaxcrank: a differentiable simulator of planar linkages with joint clearances.
 
-The public API is what ``__all__`` lists. The modules live in four layers, each
+The public API is what ``__all__`` lists. The modules live in five layers, each
 importing only from the ones before it:
 
 - ``jaxcrank.physics``: the description (``linkage``, ``drivers``, ``presets``, ``joints``,
@@ -10,10 +10,12 @@ importing only from the ones before it:
   ``model``; ``ideal``, ``reference``);
 - ``jaxcrank.numerics``: ``results``, ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``,
   ``steady``;
-- ``jaxcrank.analysis``: ``metrics``, ``outputs``, and the validation rigs in
-  ``analysis.validation`` (``wall_impact``, ``memory_audit``);
+- ``jaxcrank.analysis``: ``metrics``, ``outputs``, ``kinematic_summary``, and the validation
+  rigs in ``analysis.validation`` (``wall_impact``, ``memory_audit``);
+- ``jaxcrank.views``: ``geometry``, ``drawing`` (``draw``), ``animation`` (``animate``),
+  on matplotlib;
 - ``jaxcrank.runs``: ``sweep``, ``engines``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``,
-  ``steady_cli``, ``regimes``, ``regimes_cli``.
+  ``steady_cli``, ``regimes``, ``regimes_cli``, ``view_cli``.
 
 Importing jaxcrank turns on float64 and adds two XLA CPU options to ``XLA_FLAGS``
 ([`jaxcrank.numerics.runtime`][]): a documented, process-wide decision; what it changes
@@ -39,6 +41,7 @@ else:  # JAX reads this when it is imported (importing it here would delay the f
 
 if TYPE_CHECKING:  # what type checkers and the API docs read; at run time each name loads on first use (_FROM)
     from .analysis import metrics, outputs
+    from .analysis.kinematic_summary import kinematic_summary
     from .errors import CorruptFileError
     from .numerics import solve
     from .numerics.results import RESULTS, Regime
@@ -67,6 +70,8 @@ if TYPE_CHECKING:  # what type checkers and the API docs read; at run time each 
     from .physics.params import Contact, Friction, Material, ParameterError
     from .physics.presets import PRESETS, FourBar, SliderCrank, four_bar, paper, preset, with_clearance
     from .runs import config, sampling
+    from .views.animation import animate
+    from .views.drawing import draw
 
 #: the public names, by the module (below ``jaxcrank``) each comes from; each loads on first use
 _FROM = {
@@ -93,6 +98,9 @@ _FROM = {
     "physics.params": ("Contact", "Friction", "Material", "ParameterError"),
     "physics.presets": ("PRESETS", "FourBar", "SliderCrank", "four_bar", "paper", "preset", "with_clearance"),
     "runs": ("config", "sampling"),
+    "views.drawing": ("draw",),
+    "views.animation": ("animate",),
+    "analysis.kinematic_summary": ("kinematic_summary",),
 }  # fmt: skip
 _ORIGIN = {name: module for module, names in _FROM.items() for name in names}
 
@@ -139,6 +147,9 @@ except PackageNotFoundError:  # a source tree that was not installed
     __version__ = "0+unknown"
 
 __all__ = [
+    "animate",
+    "draw",
+    "kinematic_summary",
     "CONTACT_LAWS",
     "DEFAULTS",
     "FRICTION_LAWS",

@@ -119,3 +119,14 @@ def equation_context(source_info):
         return source_info_util.user_context(source_info.traceback, name_stack=stack)
     except (AttributeError, TypeError):  # pragma: no cover - layout of a future JAX
         return contextlib.nullcontext()
+
+
+def mark_animation_started(anim) -> None:
+    """Tell a matplotlib ``Animation`` its frames are drawn (by the caller, not by
+    matplotlib's event loop), so it does not warn, when deleted, that it rendered nothing.
+
+    Matplotlib has no public switch for that warning. Private: the attribute
+    ``Animation._draw_was_started`` (matplotlib 3.x). Where it has moved, the warning may
+    show; nothing else changes.
+    """
+    anim._draw_was_started = True

@@ -1,5 +1,5 @@
 """The package's layout: files of a readable size, imports that run one way (no import
-cycle between modules; jaxcrank's layers physics, numerics, analysis, runs each import
+cycle between modules; jaxcrank's layers physics, numerics, analysis, views, runs each import
 only the ones before them), and private APIs of other packages read in one shim only
 (jaxcrank/_private.py). Static checks of the sources: nothing is imported or run."""
 
@@ -79,7 +79,7 @@ def _all_imports(path: Path) -> set[str]:
 
 
 #: jaxcrank's layers, each importing only from the ones before it (jaxcrank/__init__.py)
-LAYERS = ("physics", "numerics", "analysis", "runs")
+LAYERS = ("physics", "numerics", "analysis", "views", "runs")
 #: modules of the top package every layer may import
 SHARED = ("jaxcrank.errors", "jaxcrank._private")
 

@@ -1,7 +1,8 @@
 """Command line: ``jaxcrank simulate [--config FILE | --design RESULT_JSON] [--out DIR]
 [--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]``, ``jaxcrank steady``
 ([`jaxcrank.runs.steady_cli`][]), ``jaxcrank regimes`` ([`jaxcrank.runs.regimes_cli`][]) and
-``jaxcrank optimize`` ([`optim.cli`][]).
+``jaxcrank optimize`` ([`optim.cli`][]), ``jaxcrank assemble``, ``jaxcrank draw`` and ``jaxcrank animate``
+([`jaxcrank.runs.view_cli`][]).
 
 A command's options are added, and JAX imported, only once the command is named:
 ``jaxcrank --help`` lists the commands without loading JAX."""
@@ -24,6 +25,8 @@ COMMANDS = {
     "regimes": "classify the steady-state regime (periodic and its period, or not) of every design of a sweep spec",
     "optimize": "minimise the RMS transmission-angle error (paper Eq. 19) or a design objective with optax",
     "assemble": "assemble a linkage at a driver angle: the poses, each dyad's branch, the lines that keep it",
+    "draw": "draw a linkage at a driver angle (PNG, SVG, PDF) and print its kinematic summary",
+    "animate": "animate a run's mechanism (GIF, MP4, HTML), the ideal one beside it and the pins in their holes",
 }
 
 
@@ -203,6 +206,10 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
             from . import assemble_cli
 
             assemble_cli.add_arguments(p)
+        elif name in ("draw", "animate"):
+            from . import view_cli
+
+            (view_cli.add_draw_arguments if name == "draw" else view_cli.add_animate_arguments)(p)
         else:
             from optim import cli as optim_cli
 
@@ -246,6 +253,10 @@ def main(argv=None) -> int:
             from . import assemble_cli
 
             return assemble_cli.run(args)
+        if args.command in ("draw", "animate"):
+            from . import view_cli
+
+            return (view_cli.run_draw if args.command == "draw" else view_cli.run_animate)(args)
     except (ParameterError, SimulationError, SteadyStateError, CorruptFileError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)
         return 2

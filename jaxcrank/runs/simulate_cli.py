@@ -75,6 +75,7 @@ def run(args) -> int:
     import numpy as np
 
     from ..analysis import outputs
+    from ..analysis.kinematic_summary import format_summary, kinematic_summary
     from ..numerics import solve
     from ..physics.params import ParameterError
     from . import cache, config, programs
@@ -127,6 +128,7 @@ def run(args) -> int:
         np.savetxt(fh, table, fmt="%.10g", delimiter=",", newline="\r\n", header=",".join(units), comments="")
 
     metrics = {**outputs.summary_metrics(sim), "window_end_s": float(cols["t"][-1])}
+    kinematics = kinematic_summary(mech)
     window = _window_label(metrics, period, prescribed)
     i0 = int(np.searchsorted(cols["t"], metrics["window_start_s"]))
     summary = {
@@ -155,6 +157,7 @@ def run(args) -> int:
         },
         "closure_residual_max_m": float(np.max(every.closure_residual)) if every.closure_residual.size else 0.0,
         "mechanism": mech.linkage().name,
+        "kinematics": kinematics,
         "units": units,
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
@@ -162,10 +165,25 @@ def run(args) -> int:
         from . import plots
 
         plots.save_figures(cols, mech, out / "figures")
+        _save_drawing(mech, out / "figures" / "linkage.png")
     print(f"wrote {out}/ (trajectory.csv, config.toml, summary.json{'' if args.no_figures else ', figures/'})")
     print(f"  {int(sim.num_steps)} steps ({int(sim.num_rejected)} rejected) in {wall:.1f} s, compilation included")
     print(f"  {window}: {headline_text(summary['metrics'])}")
+    print("  the ideal mechanism over a turn of the driver:")
+    for line in format_summary(kinematics):
+        print(f"    {line}")
     return 0
+
+
+def _save_drawing(mech, path) -> None:
+    """The linkage drawn at its driver's initial angle ([`jaxcrank.views.drawing.draw`][]) into ``path``."""
+    import matplotlib.pyplot as plt
+
+    from ..views.drawing import draw
+
+    fig = draw(mech)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def headline_text(metrics: dict) -> str:

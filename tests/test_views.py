@@ -1,0 +1,176 @@
+"""Drawings and animations: what is drawn is where the assembly puts it, clearance joints
+are marked, the animation's frames follow the run, and the files play."""
+
+import glob
+import math
+import re
+import shutil
+import subprocess
+
+import jax.numpy as jnp
+import matplotlib
+import numpy as np
+import pytest
+from matplotlib.patches import Circle, Polygon
+
+import jaxcrank as jc
+from jaxcrank.physics import closure
+from jaxcrank.physics.compiled import compile_model
+from jaxcrank.runs import config
+from jaxcrank.runs.cli import main
+from jaxcrank.views import animation, drawing
+
+matplotlib.use("Agg")
+
+LINKAGES = sorted(glob.glob("docs/linkages/*.toml"))
+MECHANISMS = [("preset", n) for n in jc.PRESETS] + [("file", p) for p in LINKAGES]
+
+
+def _mechanism(kind, name):
+    return jc.preset(name) if kind == "preset" else config.load(name)
+
+
+def _assembly_points(mech, phi):
+    """Each joint's hole (guide) and pin (slider) point, m, from the assembly's own frames
+    (`jaxcrank assemble`'s path), not from the drawing's geometry."""
+    model = compile_model(mech)
+    lk = model.linkage
+    frames = closure.ideal_frames(lk, model.plan, jnp.asarray(phi), model.signs, model.guesses)
+    out = {}
+    for j, conn in lk.connections.items():
+        pts = []
+        for site in conn.sites():
+            local = (lk.ground if site.body == "ground" else lk.bodies[site.body].points)[site.point]
+            if site.body == "ground":
+                pts.append(np.array([float(local.x), float(local.y)]))
+            else:
+                pts.append(np.asarray(jnp.stack(frames[site.body].point(local.pair())), dtype=float))
+        out[j] = pts
+    return out
+
+
+@pytest.mark.parametrize("kind,name", MECHANISMS, ids=[n.split("/")[-1] for _, n in MECHANISMS])
+def test_drawn_joints_sit_where_the_assembly_puts_them(kind, name):
+    mech = _mechanism(kind, name)
+    angle = 37.0  # deg: away from the initial angle and from dead centres
+    phi = float(mech.linkage().driver.initial_angle) + math.radians(angle)
+    fig = drawing.draw(mech, math.degrees(phi))
+    try:
+        ax = fig.axes[0]
+        drawn = {p.get_gid(): p for p in ax.patches if p.get_gid()}
+        expected = _assembly_points(mech, phi)
+        lk = mech.linkage()
+        assert {g for g in drawn if g.startswith("joint:")} == {f"joint:{j}" for j in lk.connections}
+        for j, (hole, pin) in expected.items():
+            art = drawn[f"joint:{j}"]
+            if lk.connections[j].kind == "revolute":
+                assert isinstance(art, Circle)
+                at = np.asarray(art.center)
+                # the ideal assembly closes the joint: both sides at the drawn centre, to rounding (1e-12 m)
+                np.testing.assert_allclose(at, hole, rtol=0, atol=1e-12)
+                np.testing.assert_allclose(at, pin, rtol=0, atol=1e-9)
+            else:  # the block is centred on the sliding point
+                assert isinstance(art, Polygon)
+                np.testing.assert_allclose(np.asarray(art.get_xy())[:4].mean(axis=0), pin, rtol=0, atol=1e-12)
+            clear = not lk.joints[j].ideal
+            assert (f"pin:{j}" in drawn) == (clear and lk.connections[j].kind == "revolute"), j
+            if clear:
+                assert matplotlib.colors.same_color(art.get_edgecolor(), drawing.CLEARANCE), j
+    finally:
+        matplotlib.pyplot.close(fig)
+
+
+def test_a_crank_pins_path_is_the_circle_of_the_crank_length():
+    mech = jc.preset("paper")
+    fig = drawing.draw(mech)
+    try:
+        paths = [ln for ln in fig.axes[0].lines if ln.get_linestyle() == ":"]
+        radii = [np.hypot(*np.asarray(ln.get_xydata()).T) for ln in paths]
+        crank = float(mech.crank_length)
+        # the crank pin's path: every point at the crank length from the pivot at the origin (1e-12 m)
+        assert any(np.allclose(r, crank, rtol=0, atol=1e-12) for r in radii)
+    finally:
+        matplotlib.pyplot.close(fig)
+
+
+def test_draw_refuses_bad_input_by_name(tmp_path, capsys):
+    with pytest.raises(jc.ParameterError, match="magnify"):
+        drawing.draw(jc.preset("paper"), magnify=0.0)
+    assert main(["draw", "--out", str(tmp_path / "x.txt"), "--quiet"]) == 2
+    assert ".png, .svg, .pdf" in capsys.readouterr().err
+    assert main(["draw", "--mechanism", "four-bar", "--angle", "30", "--out", str(tmp_path / "d.svg")]) == 0
+    assert (tmp_path / "d.svg").read_text().lstrip().startswith("<?xml")
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    """A short run of the paper's mechanism from the command line (0.12 s: a revolution and a fifth)."""
+    out = tmp_path_factory.mktemp("run")
+    assert main(["simulate", "--t1", "0.12", "--out", str(out), "--no-figures", "--quiet", "--no-cache"]) == 0
+    return out
+
+
+def test_frames_follow_the_last_revolutions_of_the_run(run_dir):
+    from jaxcrank.runs import view_cli
+
+    mech, cols = view_cli.read_run(run_dir)
+    idx = animation.frame_indices(cols, mech, revolutions=1.0, per_revolution=72)
+    angle = cols["crank_angle"][idx]
+    # one frame per 5 deg over the last turn, each within a sample (0.1 deg) of its target
+    assert len(idx) == 73
+    np.testing.assert_allclose(np.diff(angle), 5.0, atol=0.1 + 1e-9)
+    assert abs(angle[-1] - cols["crank_angle"][-1]) <= 0.1 + 1e-9
+    whole = animation.frame_indices(cols, mech, revolutions=None, per_revolution=72)
+    assert whole[0] == 0 and len(whole) == 87  # 1.2 turns at 5 deg a frame, with the first
+    with pytest.raises(jc.ParameterError, match="revolutions"):
+        animation.frame_indices(cols, mech, revolutions=-1.0)
+
+
+def test_animate_writes_a_gif_and_an_html_page_that_plays(run_dir, tmp_path, capsys):
+    from PIL import Image
+
+    gif, page = tmp_path / "a.gif", tmp_path / "a.html"
+    assert main(["animate", str(run_dir), "--out", str(gif), "--frames-per-revolution", "24"]) == 0
+    assert main(["animate", str(run_dir), "--out", str(page), "--frames-per-revolution", "24", "--quiet"]) == 0
+    with Image.open(gif) as im:
+        assert im.n_frames == 25
+        im.seek(0)
+        first = np.asarray(im.convert("RGB"))
+        im.seek(12)
+        middle = np.asarray(im.convert("RGB"))
+    assert first.shape == middle.shape and (first != middle).any()
+    html = page.read_text()
+    assert html.count("iVBORw0KGgo") == 25  # 25 PNG frames embedded
+    assert not re.search(r"(src|href)=[\"']?(https?:)?//", html) and "start();" in html  # nothing fetched; plays
+    assert main(["animate", str(run_dir), "--out", str(tmp_path / "a.webm")]) == 2
+    assert ".gif, .mp4, .html" in capsys.readouterr().err
+    assert main(["animate", str(tmp_path), "--out", str(gif)]) == 2
+    assert "config.toml" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("chromium") is None, reason="needs headless Chromium (apt-get install chromium)")
+def test_the_html_page_plays_in_headless_chromium(run_dir, tmp_path):
+    """A screenshot after a second of the page's time differs from one at load."""
+    from PIL import Image
+
+    page = tmp_path / "a.html"
+    assert main(["animate", str(run_dir), "--out", str(page), "--frames-per-revolution", "24", "--quiet"]) == 0
+    shots = []
+    for budget in (None, 1000):
+        shot = tmp_path / f"shot{budget}.png"
+        cmd = [
+            "chromium",
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--window-size=1000,700",
+            f"--screenshot={shot}",
+            page.as_uri(),
+        ]
+        if budget is not None:
+            cmd.insert(-1, f"--virtual-time-budget={budget}")
+        subprocess.run(cmd, check=True, capture_output=True, timeout=120)
+        with Image.open(shot) as im:
+            shots.append(np.asarray(im.convert("RGB")))
+    assert shots[0].shape == shots[1].shape and (shots[0] != shots[1]).any()
