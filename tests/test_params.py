@@ -123,7 +123,8 @@ def test_cli_simulate_writes_run_directory(tmp_path):
     assert set(required) <= set(header)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["solver"]["steps"] > 0 and "rms_transmission_angle_error_deg" in summary["metrics"]
-    assert len(list((out / "figures").glob("*.png"))) == 7
+    figures = {p.name for p in (out / "figures").glob("*.png")}
+    assert {"rod_x.png", "slider_x.png", "contact_force.png", "bearing_loads.png", "driving_moment.png"} <= figures
     # config.toml reproduces the run's parameters
     assert all(config.load(out / "config.toml").joints[j].friction.coefficient == 0.05 for j in "BC")
 

@@ -36,6 +36,8 @@ _JOINT_COLUMNS = (
     ("force_{}_normal", "N"),
     ("force_{}_friction", "N"),
     ("slip_speed_{}", "m/s"),
+    ("force_{}_x", "N"),
+    ("force_{}_y", "N"),
 )
 
 
@@ -43,8 +45,12 @@ def columns(mech) -> dict[str, str]:
     """Column name -> unit of [`trajectory`][jaxcrank.analysis.outputs.trajectory] for ``mech``, in CSV order:
     time; each body's centre-of-mass pose, velocity and acceleration (``<body>_x``,
     ``<body>_angle``, ``<body>_vx``, ``<body>_omega``, ``<body>_alpha``, ...) and the ideal
-    mechanism's (``ideal_<body>_x``, ...); each joint's eccentricity, penetration, normal
-    and friction force and slip speed; driving moments; transmission angles; energies."""
+    mechanism's (``ideal_<body>_x``, ...); per joint ``<j>``: its eccentricity
+    (``ecc_<j>_x``, ``ecc_<j>_y``, pin minus hole, m), penetration, normal and friction
+    force (``force_<j>_normal``: an ideal joint's reaction magnitude), slip speed, and the
+    force on its pin (or slider) side in the world frame (``force_<j>_x``,
+    ``force_<j>_y``, N: a joint law's force, an ideal joint's reaction; the hole or guide
+    side carries minus it); driving moments; transmission angles; energies."""
     model_ = model.compile_model(mech)
     tree = model_.tree
     out = {"t": "s"}
@@ -93,7 +99,7 @@ def trajectory(sim: Simulation, frames_: model.Frame | None = None) -> dict[str,
                 cols[f"{prefix}{b}_{k}"] = v
     for m, j in enumerate(tree.joints):
         values = (f.eccentricity[:, m, 0], f.eccentricity[:, m, 1], f.penetration[:, m], f.normal_force[:, m])
-        values += (f.friction_force[:, m], f.slip_speed[:, m])
+        values += (f.friction_force[:, m], f.slip_speed[:, m], f.joint_force[:, m, 0], f.joint_force[:, m, 1])
         for (pattern, _), v in zip(_JOINT_COLUMNS, values):
             cols[pattern.format(j)] = v
     cols.update(driving_moment=f.driving_moment, ideal_driving_moment=f.ideal_driving_moment)

@@ -64,6 +64,10 @@ class Frame(NamedTuple):
         normal_force: per joint, N: the contact's normal force, or an ideal joint's
             reaction magnitude.
         friction_force: per joint, N.
+        joint_force: per joint, the force on its pin (or slider) side, world frame, N,
+            (joints, 2): a joint law's force ([`JointForces.force`][jaxcrank.physics.joints.JointForces]),
+            an ideal joint's reaction (its magnitude is ``normal_force``); the hole (or
+            guide) side receives minus it.
         slip_speed: per joint, m/s.
         driving_moment: N m (a torque driver's torque).
         ideal_driving_moment: the moment the ideal mechanism needs for the same driver
@@ -93,6 +97,7 @@ class Frame(NamedTuple):
     penetration: jax.Array
     normal_force: jax.Array
     friction_force: jax.Array
+    joint_force: jax.Array
     slip_speed: jax.Array
     driving_moment: jax.Array
     ideal_driving_moment: jax.Array
@@ -307,22 +312,27 @@ def _frame(model: Model, t, y) -> Frame:
     frames = {b: st.frame for b, st in mo.states.items()}
     reactions = _reactions(model, frames, q, mass, qdd, e.applied)
     zero2, zero = jnp.zeros(2), jnp.zeros(())
-    per = {k: [] for k in ("eccentricity", "penetration", "normal_force", "friction_force", "slip_speed")}
+    vectors = ("eccentricity", "joint_force")
+    per = {
+        k: [] for k in ("eccentricity", "penetration", "normal_force", "friction_force", "joint_force", "slip_speed")
+    }
     for j in tree.joints:
         f = e.forces.get(j)
         if f is None:
+            reaction = _stack(reactions[j]) if j in reactions else zero2
             values = dict(
                 eccentricity=zero2,
                 penetration=zero,
-                normal_force=safe_norm(_stack(reactions[j])) if j in reactions else zero,
+                normal_force=safe_norm(reaction) if j in reactions else zero,
                 friction_force=zero,
+                joint_force=reaction,
                 slip_speed=zero,
             )
         else:
-            values = {k: getattr(f, k) for k in per}
+            values = {k: getattr(f, "force" if k == "joint_force" else k) for k in per}
         for k in per:
-            per[k].append(values[k])
-    stacked = {k: (jnp.stack(v) if v else jnp.zeros((0, 2) if k == "eccentricity" else 0)) for k, v in per.items()}
+            per[k].append(jnp.asarray(values[k], dtype=float))
+    stacked = {k: (jnp.stack(v) if v else jnp.zeros((0, 2) if k in vectors else 0)) for k, v in per.items()}
 
     nb = len(tree.bodies)
     phys_works = y[-2:] * _stack(scales(model)[-2:])

@@ -1,54 +1,50 @@
-"""Figures in the style of the paper (Figs. 4-10), from [`jaxcrank.analysis.outputs.trajectory`][] columns."""
+"""Figures of a run in the style of the paper (Figs. 4-10) and its bearing loads, from
+[`jaxcrank.analysis.outputs.trajectory`][] columns, drawn against the driven body's angle
+or against time, in one style (`STYLE`); and figures of a
+sweep's table ([`sweep_figures`][jaxcrank.runs.plots.sweep_figures])."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import matplotlib.pyplot as plt
-import numpy as np  # noqa: E402
+import numpy as np
+
+from .plots_angle import Abscissa, abscissa, after_first_revolution, clip_startup
+from .plots_loads import bearing_loads
+
+#: matplotlib settings of every figure (applied by [`style`][jaxcrank.runs.plots.style]):
+#: run figures are 8 in wide and saved at `DPI`, so 9-11 pt text stays legible when a
+#: page shows them 700 px wide
+STYLE = {
+    "font.size": 10,
+    "axes.titlesize": 11,
+    "axes.labelsize": 10,
+    "xtick.labelsize": 9,
+    "ytick.labelsize": 9,
+    "legend.fontsize": 9,
+    "figure.titlesize": 12,
+    "axes.grid": True,
+    "grid.color": "0.9",
+    "grid.linewidth": 0.6,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "axes.xmargin": 0.0,
+    "lines.linewidth": 0.9,
+    "legend.frameon": False,
+}
+#: dots per inch of the saved PNG files
+DPI = 150
 
 
-def _steady(cols, mech) -> np.ndarray:
-    """Samples after the driven body's first revolution (the start-up impacts left out),
-    bool; all samples for a run that ends within it."""
-    angle = np.asarray(cols[f"{mech.linkage().driver.body}_angle"])
-    after = np.abs(angle - angle[0]) >= 360.0
-    return after if after.any() else np.ones_like(after)
+def style():
+    """A context manager in which matplotlib draws with `STYLE`."""
+    return plt.rc_context(STYLE)
 
 
-def _clip_startup(ax, t, curves, steady, unit):
-    """Limit ``ax``'s y-range to the curves' values after the start-up (``steady`` samples)
-    and shade the start-up; a peak outside that range is written in the axes and
-    marked by an arrow at the edge it crosses, so the steady motion is legible."""
-    if steady.all():
-        return
-    lo = min(float(np.min(c[steady])) for c in curves)
-    hi = max(float(np.max(c[steady])) for c in curves)
-    pad = 0.08 * (hi - lo if hi > lo else max(abs(hi), 1.0))
-    lo, hi = lo - pad, hi + pad
-    ax.set_ylim(lo, hi)
-    ax.axvspan(t[0], t[np.argmax(steady)], color="0.9", zorder=0, lw=0)
-    # the largest excursion of any curve beyond the range, written and pointed at
-    worst = None
-    for c in curves:
-        outside = (c > hi) | (c < lo)
-        if outside.any():
-            i = int(np.argmax(np.where(outside, np.abs(c), -np.inf)))
-            if worst is None or abs(c[i]) > abs(worst[1]):
-                worst = (t[i], float(c[i]))
-    if worst is not None:
-        ti, vi = worst
-        edge = hi if vi > hi else lo
-        ax.annotate(
-            f"start-up (shaded): peak {vi:,.0f} {unit} at t = {ti:.4f} s, off scale",
-            xy=(ti, edge),
-            xytext=(0.12, 0.9 if vi > hi else 0.1),
-            textcoords="axes fraction",
-            fontsize=7,
-            va="center",
-            bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "0.6", "lw": 0.5},
-            arrowprops={"arrowstyle": "->", "lw": 0.7},
-        )
+def _legend_above(ax, **kw):
+    """The axes' legend above its top right corner, outside the data."""
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncol=2, borderaxespad=0.2, **kw)
 
 
 #: per coordinate: the columns' suffixes of position, velocity and acceleration, their
@@ -62,55 +58,48 @@ _COORDINATE_ROWS = {
         ("alpha", "angular acceleration", 1.0, "rad/s$^2$"),
     ],
 }
+_IDEAL = {"ls": "--", "color": "k", "lw": 1.1}
 
 
-def _ideal_vs_clearance(cols, mech, body, coordinate):
+def _ideal_vs_clearance(cols, mech, body, coordinate, x: Abscissa):
     """3x2 grid: position, velocity, acceleration; left ideal and clearance, right error.
     The acceleration rows are scaled to the motion after the first revolution (shaded
     before), the start-up peak annotated."""
-    t = cols["t"]
-    steady = _steady(cols, mech)
-    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex=True)
+    steady = after_first_revolution(cols, mech)
+    fig, axes = plt.subplots(3, 2, figsize=(8, 7), sharex=True, layout="constrained")
     for row, (suffix, label, scale, unit) in enumerate(_COORDINATE_ROWS[coordinate]):
         real, ideal = cols[f"{body}_{suffix}"] * scale, cols[f"ideal_{body}_{suffix}"] * scale
         ax = axes[row, 0]
-        ax.plot(t, real, lw=0.7, label="with clearance")
-        ax.plot(t, ideal, lw=1.2, ls="--", color="k", label="ideal")
+        ax.plot(x.values, real, label="with clearance")
+        ax.plot(x.values, ideal, label="ideal", **_IDEAL)
         ax.set_ylabel(f"{label} [{unit}]")
-        axes[row, 1].plot(t, real - ideal, lw=0.7, color="C3")
-        axes[row, 1].set_ylabel(f"error [{unit}]")
+        axes[row, 1].plot(x.values, real - ideal, color="C3")
+        axes[row, 1].set_ylabel(f"deviation [{unit}]")
         if row == 2:
-            _clip_startup(ax, t, [real, ideal], steady, unit.replace("$^2$", "²"))
-            _clip_startup(axes[row, 1], t, [real - ideal], steady, unit.replace("$^2$", "²"))
-    what = f"{body} centre of mass" if coordinate != "angle" else body
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[0, 0].set_title(f"{what}: ideal vs clearance")
-    axes[0, 1].set_title(f"{what}: deviation (clearance - ideal)")
+            clip_startup(ax, x, [real, ideal], steady, unit.replace("$^2$", "²"))
+            clip_startup(axes[row, 1], x, [real - ideal], steady, unit.replace("$^2$", "²"))
+    what = f"{body} {coordinate}" + (" (centre of mass)" if coordinate != "angle" else "")
+    axes[0, 0].set_title(what, loc="left")
+    axes[0, 1].set_title("with clearance − ideal", loc="left")
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside lower center", ncol=2)
     for ax in axes[-1]:
-        ax.set_xlabel("t [s]")
-    fig.tight_layout()
+        ax.set_xlabel(x.label)
+        x.ticks(ax)
     return fig
 
 
-def _single(cols, mech, series, ylabel, title, unit):
-    """One panel of ``series`` (column, label, style) against time, scaled to the motion
-    after the first revolution (start-up shaded, its peak annotated)."""
-    fig, ax = plt.subplots(figsize=(9, 4))
-    for key, label, style in series:
-        ax.plot(
-            cols["t"],
-            cols[key],
-            lw=style.get("lw", 0.7),
-            ls=style.get("ls", "-"),
-            color=style.get("color"),
-            label=label,
-        )
-    _clip_startup(ax, cols["t"], [cols[key] for key, _, _ in series], _steady(cols, mech), unit)
-    ax.set_xlabel("t [s]")
+def _single(cols, mech, x: Abscissa, series, ylabel, title, unit):
+    """One panel of ``series`` (column, label, style), scaled to the motion after the first
+    revolution (start-up shaded, its peak annotated)."""
+    fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
+    for key, label, style_ in series:
+        ax.plot(x.values, cols[key], label=label, **style_)
+    clip_startup(ax, x, [cols[key] for key, _, _ in series], after_first_revolution(cols, mech), unit)
+    ax.set_xlabel(x.label)
+    x.ticks(ax)
     ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
+    ax.set_title(title, loc="left")
+    _legend_above(ax)
     return fig
 
 
@@ -118,127 +107,134 @@ def _clearance_joints(mech) -> list[str]:
     return sorted(j for j, law in mech.joints.items() if not law.ideal)
 
 
-def _contact_forces(cols, mech):
-    """The normal force of each joint with clearance, one panel each, scaled to the motion
-    after the first revolution (start-up shaded, its peak annotated). The annotated
-    start-up peak is the largest stored sample; ``summary.json``'s peaks are over every
-    solver step, so they can be larger."""
+def _contact_forces(cols, mech, x: Abscissa | None = None):
+    """The normal force of each joint with clearance at the samples, one panel each, scaled
+    to the motion after the first revolution (start-up shaded, its peak annotated: the
+    largest stored sample; ``summary.json``'s peaks are over every solver step, so they
+    can be larger)."""
+    x = abscissa(cols, mech) if x is None else x
     joints = _clearance_joints(mech)
-    fig, axes = plt.subplots(len(joints), 1, figsize=(9, 3 * len(joints)), sharex=True, squeeze=False)
-    steady = _steady(cols, mech)
+    fig, axes = plt.subplots(len(joints), 1, figsize=(8, 0.6 + 2.6 * len(joints)), sharex=True, squeeze=False,
+                             layout="constrained")  # fmt: skip
+    steady = after_first_revolution(cols, mech)
     for k, (ax, joint) in enumerate(zip(axes[:, 0], joints)):
         f = cols[f"force_{joint}_normal"]
-        ax.plot(cols["t"], f, lw=0.6, color=f"C{k}")
-        _clip_startup(ax, cols["t"], [f], steady, "N")
-        ax.set_ylabel(f"normal force at {joint} [N]")
-        ax.set_title(f"contact force, joint {joint} (samples; summary.json's peaks are over solver steps)")
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
+        ax.plot(x.values, f, lw=0.7, color=f"C{k}")
+        clip_startup(ax, x, [f], steady, "N")
+        ax.set_ylabel("normal force [N]")
+        ax.set_title(f"contact force at joint {joint}", loc="left")
+    axes[-1, 0].set_xlabel(x.label)
+    x.ticks(axes[-1, 0])
     return fig
 
 
 def _pin_trajectories(cols, mech):
     """Each clearance joint's pin centre relative to its hole (a guide's slider: lateral
-    offset and tilt times half its length) with the clearance drawn."""
+    offset and tilt times half its length) with the clearance drawn; two panels to a row."""
     joints = _clearance_joints(mech)
-    fig, axes = plt.subplots(1, len(joints), figsize=(5 * len(joints), 5), squeeze=False)
+    columns = min(len(joints), 2)
+    rows = -(-len(joints) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(8 if columns > 1 else 4.6, 4.4 * rows), squeeze=False,
+                             layout="constrained")  # fmt: skip
     circle = np.linspace(0, 2 * np.pi, 361)
-    for ax, joint in zip(axes[0], joints):
+    for ax, joint in zip(axes.flat, joints):
         c = float(mech.joints[joint].clearance) * 1e3
-        ax.plot(cols[f"ecc_{joint}_x"] * 1e3, cols[f"ecc_{joint}_y"] * 1e3, lw=0.5)
-        ax.plot(cols[f"ecc_{joint}_x"][:1] * 1e3, cols[f"ecc_{joint}_y"][:1] * 1e3, "go", ms=4, label="start")
+        ex, ey = cols[f"ecc_{joint}_x"] * 1e3, cols[f"ecc_{joint}_y"] * 1e3
+        ax.plot(ex, ey, lw=0.5)
+        ax.plot(ex[:1], ey[:1], "o", color="C2", ms=5, label="start", zorder=5)
         if "revolute" in mech.joints[joint].kinds:
-            ax.plot(c * np.cos(circle), c * np.sin(circle), "k--", lw=1.0, label=f"clearance c = {c:.3g} mm")
+            ax.plot(c * np.cos(circle), c * np.sin(circle), "k--", lw=1.0, label=f"clearance {c:.3g} mm")
             ax.set_aspect("equal")
-            ax.set_title(f"pin centre relative to bearing centre, joint {joint}")
+            ax.set_title(f"joint {joint}: pin centre in its bearing", loc="left")
         else:
             for sign in (-1, 1):
-                ax.axhline(sign * c, color="k", ls="--", lw=1.0)
-            ax.set_title(f"slider in its guide, joint {joint} (dashed: clearance {c:.3g} mm)")
+                ax.axhline(sign * c, color="k", ls="--", lw=1.0, label=f"clearance {c:.3g} mm" if sign > 0 else None)
+            ax.set_title(f"joint {joint}: slider in its guide", loc="left")
         ax.set_xlabel("x [mm]")
         ax.set_ylabel("y [mm]")
-        ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2)
+    for ax in axes.flat[len(joints) :]:
+        ax.set_visible(False)
     return fig
 
 
-def _transmission(cols):
-    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    axes[0].plot(cols["t"], cols["transmission_angle"], lw=0.7, label="with clearance")
-    axes[0].plot(cols["t"], cols["ideal_transmission_angle"], lw=1.2, ls="--", color="k", label="ideal")
+def _transmission(cols, x: Abscissa):
+    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True, layout="constrained")
+    axes[0].plot(x.values, cols["transmission_angle"], label="with clearance")
+    axes[0].plot(x.values, cols["ideal_transmission_angle"], label="ideal", **_IDEAL)
     axes[0].set_ylabel("transmission angle [deg]")
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[1].plot(cols["t"], cols["transmission_angle"] - cols["ideal_transmission_angle"], lw=0.7, color="C3")
-    axes[1].set_ylabel("error [deg]")
-    axes[1].set_xlabel("t [s]")
-    axes[0].set_title("transmission angle")
-    fig.tight_layout()
+    axes[0].set_title("transmission angle", loc="left")
+    _legend_above(axes[0])
+    axes[1].plot(x.values, cols["transmission_angle"] - cols["ideal_transmission_angle"], color="C3")
+    axes[1].set_ylabel("deviation [deg]")
+    axes[1].set_xlabel(x.label)
+    x.ticks(axes[1])
     return fig
 
 
-def figures(cols, mech) -> dict:
-    """All figures of a run as ``{file name: matplotlib Figure}``. ``cols``: the columns of
-    [`jaxcrank.analysis.outputs.trajectory`][] of a run of ``mech``.
+def figures(cols, mech, *, against: str = "angle") -> dict:
+    """All figures of a run as ``{file name: matplotlib Figure}``, drawn in
+    `STYLE`. ``cols``: the columns of
+    [`jaxcrank.analysis.outputs.trajectory`][] of a run of ``mech``; ``against``: the
+    time series' x axis, ``"angle"`` (the driven body's angle since the start, deg) or
+    ``"time"`` (s) ([`abscissa`][jaxcrank.runs.plots_angle.abscissa]).
 
     One figure per deviation the mechanism reports (``<body>_<coordinate>.png``: position,
     velocity, acceleration, ideal against clearance), the output link's acceleration, the
     contact force of every clearance joint, the driving moment, the pin trajectories in
-    their bearings and the transmission angle. Accelerations, contact forces and the
-    driving moment are scaled to the motion after the first revolution (the start-up
-    impacts would squash it): the first revolution is shaded and its peak written in the
-    panel. A run shorter than one revolution is drawn whole."""
+    their bearings, the transmission angle, and the load on every joint's bearing
+    (``bearing_loads.png``, [`jaxcrank.runs.plots_loads.bearing_loads`][]). Accelerations,
+    contact forces and the driving moment are scaled to the motion after the first
+    revolution (the start-up impacts would squash it): the first revolution is shaded and
+    its peak written in the panel; the bearing loads leave it out. A run shorter than one
+    revolution is drawn whole.
+
+    Raises:
+        ValueError: if ``against`` is neither ``"angle"`` nor ``"time"``.
+    """
+    x = abscissa(cols, mech, against)
     outputs = mech.linkage().outputs
     out = {}
-    for body, coordinate in outputs.deviations:
-        out[f"{body}_{coordinate}.png"] = _ideal_vs_clearance(cols, mech, body, coordinate)
-    if outputs.acceleration is not None:
-        body, coordinate = outputs.acceleration
-        suffix, label, _, unit = _COORDINATE_ROWS[coordinate][2]
-        out[f"{body}_acceleration.png"] = _single(
-            cols,
-            mech,
-            [
-                (f"{body}_{suffix}", "with clearance", {}),
-                (f"ideal_{body}_{suffix}", "ideal", {"ls": "--", "color": "k", "lw": 1.2}),
-            ],
-            f"{body} {label} [{unit}]",
-            f"{body} {label}",
-            unit.replace("$^2$", "²"),
-        )
-    if _clearance_joints(mech):
-        out["contact_force.png"] = _contact_forces(cols, mech)
-    out["driving_moment.png"] = _single(
-        cols,
-        mech,
-        [
-            ("driving_moment", "with clearance", {}),
-            ("ideal_driving_moment", "ideal", {"ls": "--", "color": "k", "lw": 1.2}),
-        ],
-        "driving moment [N m]",
-        "driving moment",
-        "N m",
-    )
-    if _clearance_joints(mech):
-        out["pin_trajectories.png"] = _pin_trajectories(cols, mech)
-    if "transmission_angle" in cols:
-        out["transmission_angle.png"] = _transmission(cols)
+    with style():
+        for body, coordinate in outputs.deviations:
+            out[f"{body}_{coordinate}.png"] = _ideal_vs_clearance(cols, mech, body, coordinate, x)
+        if outputs.acceleration is not None:
+            body, coordinate = outputs.acceleration
+            suffix, label, _, unit = _COORDINATE_ROWS[coordinate][2]
+            series = [(f"{body}_{suffix}", "with clearance", {}), (f"ideal_{body}_{suffix}", "ideal", _IDEAL)]
+            out[f"{body}_acceleration.png"] = _single(
+                cols, mech, x, series, f"{label} [{unit}]", f"{body} {label}", unit.replace("$^2$", "²")
+            )
+        if _clearance_joints(mech):
+            out["contact_force.png"] = _contact_forces(cols, mech, x)
+        series = [("driving_moment", "with clearance", {}), ("ideal_driving_moment", "ideal", _IDEAL)]
+        out["driving_moment.png"] = _single(cols, mech, x, series, "moment [N m]", "driving moment", "N m")
+        if _clearance_joints(mech):
+            out["pin_trajectories.png"] = _pin_trajectories(cols, mech)
+        if "transmission_angle" in cols:
+            out["transmission_angle.png"] = _transmission(cols, x)
+        out["bearing_loads.png"] = bearing_loads(cols, mech, after_first_revolution(cols, mech))
     return out
 
 
-def save_figures(cols, mech, directory) -> list[Path]:
-    """Write [`figures`][jaxcrank.runs.plots.figures] as PNG files into ``directory``; returns their paths."""
+def save_figures(cols, mech, directory, *, against: str = "angle") -> list[Path]:
+    """Write [`figures`][jaxcrank.runs.plots.figures] (``against`` as there) as PNG files
+    into ``directory`` at `DPI`; returns their paths.
+
+    Raises:
+        ValueError: if ``against`` is neither ``"angle"`` nor ``"time"``.
+    """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, fig in figures(cols, mech).items():
+    for name, fig in figures(cols, mech, against=against).items():
         path = directory / name
-        fig.savefig(path, dpi=120)
+        fig.savefig(path, dpi=DPI)
         plt.close(fig)
         paths.append(path)
     return paths
 
 
-# ------------------------------------------------------------------ sweeps
 _UNIT_LABELS = {
     "_m_s2": "m/s^2",
     "_kg_m2": "kg m^2",
@@ -273,6 +269,16 @@ def _shown(col: str) -> tuple[str, float]:
     return label, 1.0
 
 
+def _edges(levels: np.ndarray) -> np.ndarray:
+    """Cell edges around sorted grid ``levels``: halfway between neighbours, the ends half a
+    gap out; a single level gets a cell 10 % of its value wide (1 wide at zero)."""
+    if len(levels) == 1:
+        half = 0.05 * abs(levels[0]) or 0.5
+        return np.array([levels[0] - half, levels[0] + half])
+    mid = (levels[1:] + levels[:-1]) / 2
+    return np.concatenate([[2 * levels[0] - mid[0]], mid, [2 * levels[-1] - mid[-1]]])
+
+
 def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
     """Figures of a sweep table ([`jaxcrank.runs.sweep.read_table`][jaxcrank.runs.sweep_table.read_table]) into
     ``out_dir``:
@@ -284,12 +290,17 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
     maps and left out elsewhere."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    with style():
+        return _sweep_figures(table, sampling, param_cols, metrics, out_dir)
+
+
+def _sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
     ok = np.asarray(table["status"]) == "ok"
     files = []
 
     def save(fig, name):
         fig.tight_layout()
-        fig.savefig(out_dir / name, dpi=120)
+        fig.savefig(out_dir / name, dpi=DPI)
         plt.close(fig)
         files.append(out_dir / name)
 
@@ -302,7 +313,9 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
             z = np.full((len(ua), len(ub)), np.nan)
             z[np.searchsorted(ua, a[ok]), np.searchsorted(ub, b[ok])] = np.asarray(table[m])[ok] * fm
             fig, ax = plt.subplots(figsize=(6, 4.8))
-            im = ax.pcolormesh(ub, ua, z, shading="nearest", cmap="viridis")
+            im = ax.pcolormesh(_edges(ub), _edges(ua), z, shading="flat", cmap="viridis")
+            ax.grid(False)
+            ax.spines[:].set_visible(True)
             fig.colorbar(im, ax=ax, label=lm)
             if (~ok).any():
                 ax.plot(b[~ok], a[~ok], "rx", label="failed / invalid")
@@ -347,7 +360,7 @@ def sweep_figures(table, sampling, param_cols, metrics, out_dir) -> list[Path]:
                 mean = np.array([s.mean() for s in stats])
                 low, high = mean - [s.min() for s in stats], [s.max() for s in stats] - mean
                 ax.errorbar(xs, mean, yerr=[low, high], fmt="o", ms=3, capsize=2, lw=0.8)
-            ax.set_ylabel(lm, fontsize=7)
+            ax.set_ylabel(lm, fontsize=8)
         axes[-1, 0].set_xlabel(lc)
         axes[0, 0].set_title(
             f"metrics vs {lc.split(' [')[0]}"

@@ -65,6 +65,72 @@ class Phase:
         return False
 
 
+class _PlainProgress:
+    """[`progress`][jaxcrank.runs.programs.progress] for a stream that is not a terminal."""
+
+    def __init__(self, total: int, initial: int, desc: str, unit: str, stream, every: float):
+        self.total, self.n, self.desc, self.unit, self.stream = int(total), int(initial), desc, unit, stream
+        self._step = max(1.0, every * self.total)
+        self._next = (self.n // self._step + 1) * self._step
+
+    def _line(self, text: str):
+        print(f"{self.desc}: {text}", file=self.stream, flush=True)
+
+    def __enter__(self):
+        self._start = time.perf_counter()
+        self._line(f"{self.n}/{self.total} {self.unit}s ...")
+        return self
+
+    def update(self, n: int = 1):
+        self.n += int(n)
+        if self.n >= self._next and self.n < self.total:
+            self._next = (self.n // self._step + 1) * self._step
+            elapsed, share = time.perf_counter() - self._start, 100 * self.n / max(self.total, 1)
+            self._line(f"{self.n}/{self.total} {self.unit}s ({share:.0f} %) in {elapsed:.0f} s")
+
+    def __exit__(self, *exc):
+        state = "failed" if exc[0] is not None else "done"
+        self._line(f"{state}, {self.n}/{self.total} {self.unit}s in {time.perf_counter() - self._start:.1f} s")
+        return False
+
+
+class _Silent:
+    def __enter__(self):
+        return self
+
+    def update(self, n: int = 1):
+        pass
+
+    def __exit__(self, *exc):
+        return False
+
+
+def progress(
+    total: int,
+    *,
+    initial: int = 0,
+    desc: str = "",
+    unit: str = "it",
+    disable: bool = False,
+    stream=None,
+    every: float = 0.1,
+):
+    """The progress of ``total`` units of work, a context manager whose ``update(n)`` counts
+    ``n`` more done (as a tqdm bar's): a tqdm bar when ``stream`` (default
+    ``sys.stderr``) is a terminal; elsewhere (a log, a pipe) plain lines on it, no
+    carriage returns: one when it starts, one each time another fraction ``every`` of
+    ``total`` is done, and one when it ends (done or failed, with the seconds).
+    ``initial``: the units already done (a resumed run); ``disable``: show nothing."""
+    stream = sys.stderr if stream is None else stream
+    if disable:
+        return _Silent()
+    if bool(getattr(stream, "isatty", lambda: False)()):
+        from tqdm.auto import tqdm
+
+        return tqdm(total=total, initial=initial, desc=desc, unit=unit, file=stream)
+    return _PlainProgress(total, initial, desc, unit, stream, every)
+
+
 def _split(mech, fold: bool = False):
     """The mechanism's values (float64 arrays, in leaf order) and what makes its program:
     its tree structure with the other leaves (zeros, names) in place. ``fold``: every

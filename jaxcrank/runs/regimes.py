@@ -73,7 +73,6 @@ from pathlib import Path
 
 import numpy as np
 from jaxtyping import ArrayLike, Float, Shaped
-from tqdm.auto import tqdm
 
 from ..numerics import results, shooting
 from ..numerics.results import RESULTS, Regime
@@ -83,6 +82,7 @@ from ..physics import model
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.parameters import set_parameters
 from ..physics.params import ParameterError
+from . import programs
 from .sweep_design import STATUSES, split_valid
 from .sweep_table import append, atomic_write, csv_text, open_table, parameter_columns, read_table, table_from_rows
 
@@ -241,7 +241,9 @@ def classify(
         chunk: designs per engine call and per checkpoint, >= 1 (default: kernel 16 per
             thread, xla 1).
         threads: kernel threads (default: the CPUs this process may use).
-        progress: tqdm progress bar.
+        progress: show the progress on standard error
+            ([`jaxcrank.runs.programs.progress`][]: a bar on a terminal, a line every 10 %
+            of the designs in a log).
 
     Raises:
         ParameterError: for an argument out of its range (the message names it), an
@@ -278,8 +280,9 @@ def classify(
 
         chunk = default_chunk() if engine == "kernel" else 1
     m = shooting.dynamic_size(base)
-    with tqdm(total=len(designs), initial=len(done) + len(invalid), desc="designs", unit="design",
-              disable=not progress) as bar:  # fmt: skip
+    with programs.progress(
+        len(designs), initial=len(done) + len(invalid), desc="designs", unit="design", disable=not progress
+    ) as bar:
         for s in range(0, len(todo), chunk):
             idx = todo[s : s + chunk]
             xs = designs[idx]

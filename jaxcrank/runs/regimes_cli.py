@@ -107,6 +107,7 @@ def regime_map(table, mech, names, path: Path) -> Path:
     from matplotlib.colors import ListedColormap
 
     from ..physics.parameters import parameter_unit
+    from .plots import DPI, style
     from .sweep_table import parameter_columns
 
     cols = parameter_columns(mech, names)
@@ -119,23 +120,25 @@ def regime_map(table, mech, names, path: Path) -> Path:
     z = np.full((len(ua), len(ub)), np.nan)
     z[ia, ib] = code
     colours = ["0.75"] + [plt.get_cmap("viridis")(0.35 + 0.6 * i / max(k_max - 1, 1)) for i in range(k_max)]
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
-    im = ax.pcolormesh(np.arange(len(ub)), np.arange(len(ua)), z, shading="nearest", cmap=ListedColormap(colours),
-                       vmin=-0.5, vmax=k_max + 0.5)  # fmt: skip
-    bar = fig.colorbar(im, ax=ax, ticks=range(k_max + 1))
-    bar.ax.set_yticklabels(["not periodic"] + [f"period {k}" for k in range(1, k_max + 1)])
-    bar.set_label("steady-state regime (period in crank revolutions)")
-    for i, j, k in zip(ia, ib, code):
-        ax.text(j, i, "x" if np.isnan(k) else ("-" if k == 0 else str(int(k))), ha="center", va="center",
-                color="red" if np.isnan(k) else "black", fontsize=9)  # fmt: skip
-    ax.set_xticks(np.arange(len(ub)), [f"{v:.4g}" for v in ub], rotation=45 if len(ub) > 6 else 0)
-    ax.set_yticks(np.arange(len(ua)), [f"{v:.4g}" for v in ua])
-    ax.set_xlabel(f"{names[1]} ({parameter_unit(mech, names[1])})")
-    ax.set_ylabel(f"{names[0]} ({parameter_unit(mech, names[0])})")
-    title = f"Regime map, {mech.linkage().name}"
-    ax.set_title(f"{title} (x: failed or invalid)" if np.isnan(code).any() else title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    with style():
+        fig, ax = plt.subplots(figsize=(6.4, 4.8), layout="constrained")
+        im = ax.pcolormesh(np.arange(len(ub)), np.arange(len(ua)), z, shading="nearest", cmap=ListedColormap(colours),
+                           vmin=-0.5, vmax=k_max + 0.5)  # fmt: skip
+        ax.grid(False)
+        ax.spines[:].set_visible(True)
+        bar = fig.colorbar(im, ax=ax, ticks=range(k_max + 1))
+        bar.ax.set_yticklabels(["not periodic"] + [f"period {k}" for k in range(1, k_max + 1)])
+        bar.set_label("steady-state regime (period in crank revolutions)")
+        for i, j, k in zip(ia, ib, code):
+            ax.text(j, i, "x" if np.isnan(k) else ("-" if k == 0 else str(int(k))), ha="center", va="center",
+                    color="red" if np.isnan(k) else "black", fontsize=9)  # fmt: skip
+        ax.set_xticks(np.arange(len(ub)), [f"{v:.4g}" for v in ub], rotation=45 if len(ub) > 6 else 0)
+        ax.set_yticks(np.arange(len(ua)), [f"{v:.4g}" for v in ua])
+        ax.set_xlabel(f"{names[1]} ({parameter_unit(mech, names[1])})")
+        ax.set_ylabel(f"{names[0]} ({parameter_unit(mech, names[0])})")
+        title = f"Regime map, {mech.linkage().name}"
+        ax.set_title(f"{title} (x: failed or invalid)" if np.isnan(code).any() else title, loc="left")
+        fig.savefig(path, dpi=DPI)
     plt.close(fig)
     return path
 

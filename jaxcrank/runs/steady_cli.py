@@ -68,51 +68,106 @@ def _section_eccentricities(steady):
     return out
 
 
+#: half the width of a joint's panel of the Poincare plot, clearances
+_EXTENT = 1.15
+
+
+def _zoom(ax, pts, star, cmap, norm):
+    """An inset of ``ax`` (in the corner away from them) zoomed on the section points
+    after the start from rest and on ``star``, where they gather within 0.3 clearances."""
+    import numpy as np
+
+    near = np.vstack([pts[1:], star[None, :]])
+    lo, hi = near.min(axis=0), near.max(axis=0)
+    if len(pts) < 3 or np.max(hi - lo) > 0.3:
+        return
+    centre, half = (lo + hi) / 2, max(0.6 * float(np.max(hi - lo)), 0.01)
+    inset = ax.inset_axes([0.03 if centre[0] > 0 else 0.55, 0.03 if centre[1] > 0 else 0.55, 0.42, 0.42])
+    theta = np.linspace(0, 2 * np.pi, 2000)
+    inset.plot(np.cos(theta), np.sin(theta), color="0.6", lw=0.8)
+    inset.scatter(*pts.T, c=np.arange(len(pts)), cmap=cmap, norm=norm, s=22, edgecolors="k", linewidths=0.4, zorder=3)
+    inset.plot(star[0], star[1], "*", ms=16, mfc="none", mec="C3", mew=1.5, zorder=2)
+    inset.set_xlim(centre[0] - half, centre[0] + half)
+    inset.set_ylim(centre[1] - half, centre[1] + half)
+    inset.set_aspect("equal")
+    inset.tick_params(labelleft=False, labelbottom=False, length=0)
+    inset.grid(False)
+    inset.spines[:].set_visible(True)
+    note = f"zoom ×{0.42 * 2 * _EXTENT / (2 * half):.0f}"  # on the inset's side away from the axes' edge
+    if centre[1] > 0:
+        inset.set_title(note, fontsize="small", pad=2)
+    else:
+        inset.set_xlabel(note, fontsize="small")
+    _, connectors = ax.indicate_inset_zoom(inset, edgecolor="0.4")
+    for line in connectors:
+        line.set_visible(False)
+
+
 def poincare_plot(steady, path: Path) -> Path:
     """The Poincare section (crank at its initial angle, once per revolution): pin
     eccentricity in each clearance bearing, in units of its clearance, at the settle's
-    section points (coloured by revolution) and at the orbit's start state; and, by
-    revolution, the distance of the section points to that state (periodic) or to the
-    section point before (not periodic), scaled units."""
+    section points (coloured by revolution, one colour bar for the panels; an inset
+    zooms on them where they gather) and at the orbit's start state (an open star under
+    them); and, by revolution, the distance of the section points to that state
+    (periodic) or to the section point before (not periodic), scaled units. Drawn in
+    `jaxcrank.runs.plots.STYLE`."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.colors import BoundaryNorm
+    from matplotlib.ticker import MaxNLocator
+
+    from .plots import DPI, style
 
     ecc = _section_eccentricities(steady)
-    fig, axes = plt.subplots(1, len(ecc) + 1, figsize=(5 * (len(ecc) + 1), 4.6), squeeze=False)
     m = np.asarray(steady.monodromy).shape[0]
     pts_all = np.asarray(steady.section_points)[:, :m]
-    ax = axes[0, -1]
-    if steady.regime == "periodic":
-        gap = np.max(np.abs(pts_all - np.asarray(steady.section_state)[:m]), axis=1)
-        revs = np.arange(len(gap))
-        ax.set_ylabel("max |y_n - y*| (scaled: clearances)")
-        ax.set_title("distance to the orbit's start")
-    else:  # the last section point is the state shown: compare each point with the one before instead
-        gap = np.max(np.abs(np.diff(pts_all, axis=0)), axis=1)
-        revs = np.arange(1, len(gap) + 1)
-        ax.set_ylabel("max |y_n - y_(n-1)| (scaled: clearances)")
-        ax.set_title("distance between successive section points")
-    ax.semilogy(revs, np.maximum(gap, 1e-16), "o-", ms=3)
-    ax.set_xlabel("revolution of the settle")
-    for ax, (joint, (pts, star)) in zip(axes[0], ecc.items()):
+    n = len(pts_all)
+    norm = BoundaryNorm(np.arange(-0.5, n + 0.5), n)
+    cmap = plt.get_cmap("viridis", n)
+    with style():
+        fig, axes = plt.subplots(1, len(ecc) + 1, figsize=(4.2 * (len(ecc) + 1) + 1.0, 4.6), squeeze=False,
+                                 layout="constrained")  # fmt: skip
+        ax = axes[0, -1]
+        if steady.regime == "periodic":
+            gap = np.max(np.abs(pts_all - np.asarray(steady.section_state)[:m]), axis=1)
+            revs = np.arange(len(gap))
+            ax.set_ylabel("max |y_n − y*| (scaled)")
+            ax.set_title("distance to the orbit's start", loc="left")
+        else:  # the last section point is the state shown: compare each point with the one before instead
+            gap = np.max(np.abs(np.diff(pts_all, axis=0)), axis=1)
+            revs = np.arange(1, len(gap) + 1)
+            ax.set_ylabel("max |y_n − y_(n−1)| (scaled)")
+            ax.set_title("distance between successive points", loc="left")
+        gap = np.maximum(gap, 1e-16)
+        ax.plot(revs, gap, "o-", ms=4, color="0.3")
+        if gap.max() > 10.0 * gap.min():  # a log scale where the distances span a decade or more
+            ax.set_yscale("log")
+        ax.set_xlabel("revolution of the settle")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         theta = np.linspace(0, 2 * np.pi, 200)
-        ax.plot(np.cos(theta), np.sin(theta), color="0.6", lw=0.8, label="clearance circle")
-        sc = ax.scatter(pts[:, 0], pts[:, 1], c=np.arange(len(pts)), cmap="viridis", s=14, label="settle")
         label = "orbit start y*" if steady.regime == "periodic" else "last section point"
-        ax.plot(star[0], star[1], "r*", ms=12, label=label)
-        ax.set_aspect("equal")
-        ax.set_xlabel(f"e_x at {joint} / clearance (1)")
-        ax.set_ylabel(f"e_y at {joint} / clearance (1)")
-        ax.set_title(f"joint {joint}")
-        ax.legend(fontsize=7, loc="lower left")
-        fig.colorbar(sc, ax=ax, label="revolution")
-    k = steady.period_revolutions
-    fig.suptitle(f"Poincare section: {steady.regime}" + (f", period {k} revolution(s)" if k else ""))
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+        for ax, (joint, (pts, star)) in zip(axes[0], ecc.items()):
+            ax.plot(np.cos(theta), np.sin(theta), color="0.6", lw=0.8, label="clearance circle")
+            ax.scatter(pts[:, 0], pts[:, 1], c=np.arange(len(pts)), cmap=cmap, norm=norm, s=22, edgecolors="k",
+                       linewidths=0.4, zorder=3, label="section points")  # fmt: skip
+            ax.plot(star[0], star[1], "*", ms=16, mfc="none", mec="C3", mew=1.5, zorder=2, label=label)
+            ax.set_aspect("equal")
+            ax.set_xlim(-_EXTENT, _EXTENT)
+            ax.set_ylim(-_EXTENT, _EXTENT)
+            ax.set_xlabel("e_x / clearance")
+            ax.set_ylabel("e_y / clearance")
+            ax.set_title(f"joint {joint}", loc="left")
+            _zoom(ax, pts, star, cmap, norm)
+        axes[0, 0].legend(loc="upper left", bbox_to_anchor=(0.0, -0.14), ncol=3, fontsize="small")
+        bar = fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=list(axes[0, :-1]), shrink=0.85)
+        bar.set_label("revolution of the settle")
+        bar.ax.yaxis.set_major_locator(MaxNLocator(integer=True, nbins=min(n, 8)))
+        k = steady.period_revolutions
+        fig.suptitle(f"Poincare section: {steady.regime}" + (f", period {k} revolution(s)" if k else ""))
+        fig.savefig(path, dpi=DPI)
     plt.close(fig)
     return path
 

@@ -66,11 +66,11 @@ from pathlib import Path
 import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float, Shaped
-from tqdm.auto import tqdm
 
 from ..numerics import results
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
+from . import programs
 from .sweep_design import (
     SOLVE_KEYS,
     STATUSES,
@@ -157,7 +157,9 @@ def run(
             [`default_chunk`][jaxcrank.runs.sweep_dispatch.default_chunk].
         workers: local processes that solve chunks in parallel (one per CPU core is
             the fastest on a CPU); 1 solves in this process. Not with ``jax.distributed``.
-        progress: tqdm progress bar.
+        progress: show the progress on standard error
+            ([`jaxcrank.runs.programs.progress`][]: a bar on a terminal, a line every 10 %
+            of the designs in a log).
         engine: ``"xla"`` (the compiled JAX solve above) or ``"kernel"`` (the
             per-trajectory C kernel of [`jaxcrank.numerics.kernel`][]: tsit5 only, one
             design per CPU thread, ``workers`` must be 1; ``chunk`` is then the designs per
@@ -231,12 +233,8 @@ def run(
         emit(new)
         bar.update(len(idx))
 
-    with tqdm(
-        total=len(designs),
-        initial=len(done) + len(invalid),
-        desc="designs",
-        unit="design",
-        disable=not (progress and writer),
+    with programs.progress(
+        len(designs), initial=len(done) + len(invalid), desc="designs", unit="design", disable=not (progress and writer)
     ) as bar:
         if workers > 1 and chunks:
             run_in_workers(base, names, settings, chunks, int(workers), record)
