@@ -856,7 +856,39 @@ def table_paper_equivalence() -> str:
     return out + "\n*The earlier commit and this one are named in the JSON file.*\n" + source("paper_equivalence")
 
 
+def table_animate() -> str:
+    """Seconds to write one revolution of a run as an animation: ours against matplotlib's writer."""
+    d = results("animate")
+    rows = []
+    for name, r in d["cases"].items():
+        rows.append(
+            [
+                name,
+                r["gif"]["frames"],
+                r["gif"]["seconds"],
+                r["html"]["seconds"],
+                r["gif_matplotlib_writer"]["seconds"],
+                ratio(r["speedup_gif_vs_matplotlib_writer"]),
+                f"{r['gif']['bytes'] / 1e6:.2f} / {r['html']['bytes'] / 1e6:.2f}",
+            ]
+        )
+    body = table(
+        [
+            "run",
+            "frames",
+            "GIF (s)",
+            "HTML (s)",
+            "GIF, matplotlib's writer (s)",
+            "speedup",
+            "sizes GIF / HTML (MB)",
+        ],
+        rows,
+    )
+    return body + source("animate")
+
+
 TABLES = {
+    "animate": table_animate,
     "compile": table_compile,
     "paper_equivalence": table_paper_equivalence,
     "tracking": table_tracking,

@@ -31,7 +31,7 @@ def test_every_table_renders_from_the_json_it_names():
 
 
 #: jaxcrank's layers (jaxcrank/__init__.py); a module's page is named without its layer
-LAYERS = ("physics", "numerics", "analysis", "runs")
+LAYERS = ("physics", "numerics", "analysis", "views", "runs")
 #: packages documented on one page (their modules are the package's internals)
 ONE_PAGE = ("jaxcrank.numerics.kernel",)
 

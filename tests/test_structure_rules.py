@@ -3,7 +3,7 @@
 - only the mechanism descriptions name the slider-crank's bodies and joints; everything
   else takes names from the description (the tree's joints, the outputs, the metric
   names), so that it works for any linkage;
-- jaxcrank's layers import one way: physics <- numerics <- analysis <- runs.
+- jaxcrank's layers import one way: physics <- numerics <- analysis <- views <- runs.
 """
 
 import ast
@@ -158,7 +158,7 @@ def test_the_rules_see_real_leaks_and_pass_generic_words():
 
 # --------------------------------------------------------------------------- one-way imports between the layers
 
-LAYERS = ("physics", "numerics", "analysis", "runs")
+LAYERS = ("physics", "numerics", "analysis", "views", "runs")
 #: modules of jaxcrank below every layer (any layer may import them)
 BASE = {"jaxcrank._private", "jaxcrank.errors", "jaxcrank.__version__"}
 
@@ -197,8 +197,9 @@ def _layer(module: str) -> int | None:
 
 
 def test_layers_import_one_way():
-    """physics imports none of numerics, analysis, runs (nor the package's __init__);
-    numerics not analysis or runs; analysis not runs."""
+    """physics imports none of numerics, analysis, views, runs (nor the package's
+    __init__); numerics not analysis, views or runs; analysis not views or runs; views
+    not runs."""
     found = []
     for layer, name in enumerate(LAYERS):
         for path in sorted((ROOT / "jaxcrank" / name).rglob("*.py")):
@@ -206,7 +207,8 @@ def test_layers_import_one_way():
                 above = _layer(module)
                 if above is not None and above > layer:
                     found.append(f"{path.relative_to(ROOT)}:{line}: imports {module}")
-    assert not found, "imports against the layering physics <- numerics <- analysis <- runs:\n" + "\n".join(found)
+    layering = " <- ".join(LAYERS)
+    assert not found, f"imports against the layering {layering}:\n" + "\n".join(found)
 
 
 def test_the_layering_check_sees_an_upward_import_inside_a_function(tmp_path):

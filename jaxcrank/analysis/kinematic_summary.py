@@ -41,38 +41,40 @@ def kinematic_summary(mech: AbstractMechanism | Model, samples: int = 3600) -> d
     sample spacing (to O(spacing^2)) and its value to O(spacing^3); at a corner (a
     transmission angle reaching 0 or 180 deg) only to the sample spacing.
 
+    Its entries:
+
+    - ``mechanism``, ``driver_body``, ``driver_angle_start_deg`` (phi_0, deg),
+      ``samples``;
+    - ``output``: ``None`` where the mechanism names no output, else the output
+      (``outputs.acceleration``, else the first of ``outputs.deviations``) with
+      ``body``, ``coordinate`` (``"x"``/``"y"`` of its centre of mass, or ``"angle"``),
+      ``full_rotation`` (an angle that turns through whole revolutions), and either
+      ``stroke_m``, ``min_m``, ``max_m`` (a translation) or ``swing_deg``,
+      ``min_deg``, ``max_deg`` (an angle, unwrapped from its value at phi_0), with
+      ``min_at_driver_deg`` and ``max_at_driver_deg`` (the global extremes). A fully
+      turning angle has ``swing_deg = 360`` and ``None`` for its extremes.
+    - ``time_ratio``: ``None`` without output extremes, else the quick-return ratio
+      at constant driver speed (the ratio of the times of the two strokes is the
+      ratio of the driver angles they sweep): ``forward_stroke_deg`` (driver angle
+      from the output's global minimum to its global maximum), ``return_stroke_deg``
+      (from the maximum back to the minimum), ``ratio`` (the larger over the
+      smaller, >= 1) and ``slower_stroke`` (``"forward"`` or ``"return"``, the one
+      that sweeps the larger angle).
+    - ``transmission_angle``: ``None`` where the mechanism defines none, else
+      ``min_deg``, ``max_deg``, ``min_at_driver_deg``, ``max_at_driver_deg`` and
+      ``max_deviation_from_90_deg``. The angle is the one of the
+      ``ideal_transmission_angle`` output column
+      ([`jaxcrank.physics.frame.transmission_angle`][]): between the two transmission
+      directions, in [0, 180] deg (not folded into [0, 90]).
+    - ``grashof``: [`grashof_loops`][jaxcrank.analysis.kinematic_summary.grashof_loops].
+
     Args:
         mech: any mechanism (a preset, a written-out linkage) or a compiled model.
         samples: driver angles over the revolution, an integer >= 8.
 
     Returns:
         Plain Python values (float, int, str, bool, list, dict, None), units in the keys;
-        driver angles (``*_at_driver_deg``) in deg from phi_0, in [0, 360):
-
-        - ``mechanism``, ``driver_body``, ``driver_angle_start_deg`` (phi_0, deg),
-          ``samples``;
-        - ``output``: ``None`` where the mechanism names no output, else the output
-          (``outputs.acceleration``, else the first of ``outputs.deviations``) with
-          ``body``, ``coordinate`` (``"x"``/``"y"`` of its centre of mass, or ``"angle"``),
-          ``full_rotation`` (an angle that turns through whole revolutions), and either
-          ``stroke_m``, ``min_m``, ``max_m`` (a translation) or ``swing_deg``,
-          ``min_deg``, ``max_deg`` (an angle, unwrapped from its value at phi_0), with
-          ``min_at_driver_deg`` and ``max_at_driver_deg`` (the global extremes). A fully
-          turning angle has ``swing_deg = 360`` and ``None`` for its extremes.
-        - ``time_ratio``: ``None`` without output extremes, else the quick-return ratio
-          at constant driver speed (the ratio of the times of the two strokes is the
-          ratio of the driver angles they sweep): ``forward_stroke_deg`` (driver angle
-          from the output's global minimum to its global maximum), ``return_stroke_deg``
-          (from the maximum back to the minimum), ``ratio`` (the larger over the
-          smaller, >= 1) and ``slower_stroke`` (``"forward"`` or ``"return"``, the one
-          that sweeps the larger angle).
-        - ``transmission_angle``: ``None`` where the mechanism defines none, else
-          ``min_deg``, ``max_deg``, ``min_at_driver_deg``, ``max_at_driver_deg`` and
-          ``max_deviation_from_90_deg``. The angle is the one of the
-          ``ideal_transmission_angle`` output column
-          ([`jaxcrank.physics.frame.transmission_angle`][]): between the two transmission
-          directions, in [0, 180] deg (not folded into [0, 90]).
-        - ``grashof``: [`grashof_loops`][jaxcrank.analysis.kinematic_summary.grashof_loops].
+        driver angles (``*_at_driver_deg``) in deg from phi_0, in [0, 360).
 
     Raises:
         ParameterError: ``samples`` is not an integer >= 8; the mechanism does not
@@ -184,26 +186,28 @@ def grashof_loops(mech: AbstractMechanism | Model | Linkage) -> list[dict]:
     link; a loop with a prismatic joint is none) and its Grashof type, from the names and
     points alone: the mechanism need not assemble (a double-rocker is classified too).
 
+    Its entries:
+
+    - ``joints``: the four joint names around the loop;
+    - ``links``: ``{"body", "length_m"}`` for the link between each joint and the
+      next (the last closes the loop: the ground, in a loop through it); a length
+      is the distance between the link's two joint points, m;
+    - ``shortest_link``, ``longest_link``: body names;
+    - ``s_plus_l_m``, ``p_plus_q_m``: shortest + longest, and the other two, m;
+    - ``type``: ``"change point"`` (s + l = p + q within a relative 1e-9),
+      ``"non-Grashof triple-rocker"`` (s + l > p + q), or, with s + l < p + q,
+      ``"double-crank"`` (the ground is the shortest link), ``"crank-rocker"`` (the
+      shortest link turns about a ground pivot) or ``"double-rocker"`` (the coupler
+      is the shortest); a loop not through the ground is ``"Grashof"`` or
+      ``"non-Grashof"``;
+    - ``grashof``: whether s + l <= p + q (a change point included).
+
     Args:
         mech: a mechanism, a compiled model or a written-out linkage.
 
     Returns:
         One dict per loop, sorted by joint names; a loop through the ground starts at a
-        ground pivot (the driven body's, where it is in the loop), away from the ground:
-
-        - ``joints``: the four joint names around the loop;
-        - ``links``: ``{"body", "length_m"}`` for the link between each joint and the
-          next (the last closes the loop: the ground, in a loop through it); a length
-          is the distance between the link's two joint points, m;
-        - ``shortest_link``, ``longest_link``: body names;
-        - ``s_plus_l_m``, ``p_plus_q_m``: shortest + longest, and the other two, m;
-        - ``type``: ``"change point"`` (s + l = p + q within a relative 1e-9),
-          ``"non-Grashof triple-rocker"`` (s + l > p + q), or, with s + l < p + q,
-          ``"double-crank"`` (the ground is the shortest link), ``"crank-rocker"`` (the
-          shortest link turns about a ground pivot) or ``"double-rocker"`` (the coupler
-          is the shortest); a loop not through the ground is ``"Grashof"`` or
-          ``"non-Grashof"``;
-        - ``grashof``: whether s + l <= p + q (a change point included).
+        ground pivot (the driven body's, where it is in the loop), away from the ground.
     """
     lk = mech.linkage if isinstance(mech, Model) else mech if isinstance(mech, Linkage) else mech.linkage()
     sk = Skeleton.of(lk)

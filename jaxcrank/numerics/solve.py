@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+import sys
 
 import diffrax
 import equinox as eqx
@@ -315,7 +316,8 @@ def simulate(
             reverse-mode gradients of the discrete solve). For ``jax.jacfwd`` /
             ``jax.jvp`` pass ``diffrax.ForwardMode()``: with a few parameters it is
             the cheaper gradient.
-        progress: show a tqdm progress bar (host callback; CLI runs).
+        progress: show a tqdm progress bar where standard error is a terminal (host
+            callback; CLI runs); elsewhere nothing (the caller prints its phases).
         metrics_start: when given (s), the solve tracks the headline metrics over
             ``t > metrics_start`` ([`jaxcrank.numerics.tracking`][]: peaks at every accepted
             step, RMS over the sample times, which must then be equally spaced) into
@@ -350,7 +352,9 @@ def simulate(
     solver, rtol, atol, dt0, max_steps = options.solver, options.rtol, options.atol, options.dt0, options.max_steps
     controller = step_size_controller(solver, rtol, atol)
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
-    meter = diffrax.TqdmProgressMeter(refresh_steps=5000) if progress else diffrax.NoProgressMeter()
+    # a bar on a terminal only: elsewhere (a log, a pipe) its carriage-return redraws would fill it with lines
+    bar = progress and bool(getattr(sys.stderr, "isatty", lambda: False)())
+    meter = diffrax.TqdmProgressMeter(refresh_steps=5000) if bar else diffrax.NoProgressMeter()
     if metrics_start is not None:
         metrics_start = jnp.asarray(metrics_start, dtype=float)  # traced: one compilation for any window
         if ts is not None:

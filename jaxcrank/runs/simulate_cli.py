@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import platform
+import sys
 import time
 from pathlib import Path
 
@@ -52,6 +53,12 @@ def add_arguments(p):
         "--max-steps", type=int, default=DEFAULTS.max_steps, help=f"solver step budget (default {DEFAULTS.max_steps})"
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument(
+        "--against",
+        choices=("angle", "time"),
+        default="angle",
+        help="the figures' x axis: the driven body's angle since the start, deg (default), or time, s",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.add_argument(
         "--fold-parameters",
@@ -62,7 +69,8 @@ def add_arguments(p):
     p.add_argument(
         "--progress",
         action="store_true",
-        help="a progress bar of the simulated time (its program is compiled for this run, not kept in the cache)",
+        help="a progress bar of the simulated time on a terminal (its program is compiled for this run, not kept in "
+        "the cache)",
     )
     cache.arguments(p)
     return p
@@ -97,7 +105,7 @@ def run(args) -> int:
     metrics_start = period if args.t1 > period else 0.0
 
     def run(metrics_start, label=None):
-        if args.progress:
+        if args.progress and sys.stderr.isatty():  # elsewhere the phases' plain lines, as without it
             sim = solve.simulate(
                 mech, args.t1, n_samples=n_samples, options=options, progress=True, metrics_start=metrics_start
             )
@@ -164,7 +172,7 @@ def run(args) -> int:
     if not args.no_figures:
         from . import plots
 
-        plots.save_figures(cols, mech, out / "figures")
+        plots.save_figures(cols, mech, out / "figures", against=args.against)
         _save_drawing(mech, out / "figures" / "linkage.png")
     print(f"wrote {out}/ (trajectory.csv, config.toml, summary.json{'' if args.no_figures else ', figures/'})")
     print(f"  {int(sim.num_steps)} steps ({int(sim.num_rejected)} rejected) in {wall:.1f} s, compilation included")

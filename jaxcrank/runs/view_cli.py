@@ -1,6 +1,6 @@
 """``jaxcrank draw`` (a linkage at a driver angle, as PNG, SVG or PDF) and ``jaxcrank
 animate RUN_DIR`` (a run's mechanism moving, as GIF, MP4 or HTML), on
-[`jaxcrank.views`][]."""
+``jaxcrank.views`` ([`jaxcrank.views.drawing`][], [`jaxcrank.views.animation`][])."""
 
 from __future__ import annotations
 
@@ -51,7 +51,8 @@ def run_draw(args) -> int:
     mech = config.mechanism_from_arguments(args)
     fig = draw(mech, args.angle, magnify=args.magnify, frames=args.frames, paths=not args.no_paths)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out, dpi=150)
+    with matplotlib.rc_context({"svg.fonttype": "none"}):  # an SVG's text stays text: smaller, searchable
+        fig.savefig(args.out, dpi=150)
     plt.close(fig)
     if not args.quiet:
         print(f"wrote {args.out}")

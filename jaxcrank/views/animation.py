@@ -235,15 +235,17 @@ class MechanismAnimation(FuncAnimation):
             art.set_animated(False)
 
     def _repr_html_(self):
-        return html_page(self, standalone=False)
+        page = html_page(self, standalone=False)
+        plt.close(self.fig)  # shown as the player: a notebook need not show the still figure too
+        return page
 
 
 def check_target(path) -> Path:
-    """``path`` as a [`Path`][pathlib.Path] where [`save`][jaxcrank.views.animation.save] can
+    """``path`` as a ``pathlib.Path`` where [`save`][jaxcrank.views.animation.save] can
     write it.
 
     Raises:
-        ParameterError: a suffix not in [`FORMATS`][jaxcrank.views.animation.FORMATS], or
+        ParameterError: a suffix not in ``FORMATS`` (.gif, .mp4, .html), or
             ``.mp4`` where ffmpeg is not found (with what to do instead).
     """
     path = Path(path)

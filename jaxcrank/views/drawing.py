@@ -108,32 +108,12 @@ class Sketch:
             elif not self.ghost:
                 self._make_revolute(j, poses)
         if self.labels and not self.ghost:
+            text = dict(ha="center", va="center", zorder=7, clip_on=True)
             for j in self.lay.joints:
-                self.artists[f"label:{j.name}"] = ax.text(
-                    0,
-                    0,
-                    j.name,
-                    fontsize=9,
-                    weight="bold",
-                    ha="center",
-                    va="center",
-                    zorder=7,
-                    clip_on=True,
-                    color=CLEARANCE if j.name in self.magnify else "k",
-                )
+                colour = CLEARANCE if j.name in self.magnify else "k"
+                self.artists[f"label:{j.name}"] = ax.text(0, 0, j.name, fontsize=9, weight="bold", color=colour, **text)
             for b in self.lay.parts if self.labels != "joints" else ():
-                self.artists[f"name:{b}"] = ax.text(
-                    0,
-                    0,
-                    b,
-                    fontsize=8,
-                    style="italic",
-                    ha="center",
-                    va="center",
-                    zorder=7,
-                    clip_on=True,
-                    color=self.colours[b],
-                )
+                self.artists[f"name:{b}"] = ax.text(0, 0, b, fontsize=8, style="italic", color=self.colours[b], **text)
         if self.frames and not self.ghost:
             for b in self.lay.parts:
                 self.artists[f"x:{b}"] = ax.plot([], [], color="#d62728", lw=1.0, zorder=8)[0]

@@ -39,7 +39,7 @@ class Part:
         body: its name.
         points: its named points in its frame, m.
         centre_of_mass: in its frame, m.
-        shape: one of [`SHAPES`][jaxcrank.views.geometry.SHAPES].
+        shape: one of ``SHAPES``: ``"bar"``, ``"plate"``, ``"block"``.
         outline: in its frame, m: a bar's two end points, a plate's convex hull
             (counter-clockwise), a block's centre.
     """
