@@ -148,6 +148,26 @@ def test_animate_writes_a_gif_and_an_html_page_that_plays(run_dir, tmp_path, cap
     assert "config.toml" in capsys.readouterr().err
 
 
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs ffmpeg (apt-get install ffmpeg)")
+def test_animate_writes_an_mp4_of_every_frame(run_dir, tmp_path):
+    out = tmp_path / "a.mp4"
+    assert main(["animate", str(run_dir), "--out", str(out), "--frames-per-revolution", "24", "--quiet"]) == 0
+    probe = subprocess.run(
+        ["ffprobe", "-v", "error", "-count_frames", "-show_entries", "stream=nb_read_frames,codec_name", "-of", "csv",
+         str(out)],
+        check=True, capture_output=True, text=True,
+    ).stdout  # fmt: skip
+    assert probe.strip() == "stream,h264,25"
+
+
+def test_mp4_without_ffmpeg_says_what_to_do(run_dir, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(animation.FFMpegWriter, "isAvailable", classmethod(lambda cls: False))
+    assert main(["animate", str(run_dir), "--out", str(tmp_path / "a.mp4")]) == 2
+    err = capsys.readouterr().err
+    assert "needs ffmpeg" in err and ".gif or .html" in err
+    assert not (tmp_path / "a.mp4").exists()
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("chromium") is None, reason="needs headless Chromium (apt-get install chromium)")
 def test_the_html_page_plays_in_headless_chromium(run_dir, tmp_path):

@@ -281,15 +281,36 @@ def save(anim: MechanismAnimation, path, *, fps: float | None = None) -> Path:
         frames = [palette] + [f.quantize(palette=palette, dither=Image.Dither.NONE) for f in frames[1:]]
         frames[0].save(path, save_all=True, append_images=frames[1:], duration=round(1000.0 / fps), loop=0)
     elif suffix == ".mp4":
-        fig = anim.fig
-        writer = FFMpegWriter(fps=fps)
-        with writer.saving(fig, path, fig.dpi):
-            for _ in anim.rgba_frames():
-                writer.grab_frame()
+        _write_mp4(anim, path, fps)
     else:
         path.write_text(html_page(anim, title=path.stem, fps=fps), encoding="utf-8")
     plt.close(anim.fig)
     return path
+
+
+def _write_mp4(anim: MechanismAnimation, path: Path, fps: float) -> None:
+    """The frames piped to ffmpeg as raw RGBA (H.264, yuv420p: plays in browsers)."""
+    import subprocess
+
+    import matplotlib
+
+    frames = anim.rgba_frames()
+    first = next(frames)
+    h, w = first.shape[:2]
+    cmd = [matplotlib.rcParams["animation.ffmpeg_path"], "-y", "-loglevel", "error", "-f", "rawvideo"]
+    cmd += ["-pix_fmt", "rgba", "-s", f"{w}x{h}", "-r", f"{fps:g}", "-i", "-", "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"]
+    cmd += ["-vcodec", "libx264", "-pix_fmt", "yuv420p", str(path)]
+    with subprocess.Popen(cmd, stdin=subprocess.PIPE, stderr=subprocess.PIPE) as proc:
+        try:
+            proc.stdin.write(first.tobytes())
+            for frame in frames:
+                proc.stdin.write(frame.tobytes())
+            proc.stdin.close()
+        except BrokenPipeError:
+            pass
+        err = proc.stderr.read().decode(errors="replace").strip()
+        if proc.wait() != 0:
+            raise ParameterError(f"{path.name}: ffmpeg failed: {err.splitlines()[-1] if err else 'no message'}")
 
 
 _PLAYER = """<div class="jaxcrank-player" id="{id}">
