@@ -146,6 +146,14 @@ def test_animate_writes_a_gif_and_an_html_page_that_plays(run_dir, tmp_path, cap
     assert ".gif, .mp4, .html" in capsys.readouterr().err
     assert main(["animate", str(tmp_path), "--out", str(gif)]) == 2
     assert "config.toml" in capsys.readouterr().err
+    # a steady run's folder: its orbit.csv (the same columns) is animated
+    steady = tmp_path / "steady"
+    steady.mkdir()
+    shutil.copyfile(run_dir / "config.toml", steady / "config.toml")
+    shutil.copyfile(run_dir / "trajectory.csv", steady / "orbit.csv")
+    assert main(["animate", str(steady), "--frames-per-revolution", "12", "--quiet"]) == 0
+    with Image.open(steady / "animation.gif") as im:
+        assert im.n_frames == 13
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs ffmpeg (apt-get install ffmpeg)")

@@ -136,7 +136,10 @@ def run(args) -> int:
         np.savetxt(fh, table, fmt="%.10g", delimiter=",", newline="\r\n", header=",".join(units), comments="")
 
     metrics = {**outputs.summary_metrics(sim), "window_end_s": float(cols["t"][-1])}
-    kinematics = kinematic_summary(mech)
+    try:
+        kinematics = kinematic_summary(mech)
+    except ParameterError as err:  # the run stands without it
+        kinematics = {"unavailable": str(err)}
     window = _window_label(metrics, period, prescribed)
     i0 = int(np.searchsorted(cols["t"], metrics["window_start_s"]))
     summary = {
@@ -178,7 +181,7 @@ def run(args) -> int:
     print(f"  {int(sim.num_steps)} steps ({int(sim.num_rejected)} rejected) in {wall:.1f} s, compilation included")
     print(f"  {window}: {headline_text(summary['metrics'])}")
     print("  the ideal mechanism over a turn of the driver:")
-    for line in format_summary(kinematics):
+    for line in [kinematics["unavailable"]] if "unavailable" in kinematics else format_summary(kinematics):
         print(f"    {line}")
     return 0
 

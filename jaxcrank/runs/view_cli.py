@@ -9,6 +9,8 @@ from pathlib import Path
 
 #: what ``draw`` writes, by suffix
 DRAWINGS = (".png", ".svg", ".pdf")
+#: the tables ``animate`` reads from a run folder, the first found: a simulation's, a steady state's orbit
+TABLES = ("trajectory.csv", "orbit.csv")
 
 
 def add_draw_arguments(p) -> None:
@@ -71,10 +73,16 @@ def _summary_lines(mech) -> list[str]:
 def add_animate_arguments(p) -> None:
     """Add ``animate``'s options to its parser ``p``."""
     p.description = (
-        "Animate a run of `jaxcrank simulate` (its folder: config.toml and trajectory.csv): the mechanism moving, "
+        "Animate a run of `jaxcrank simulate` (its folder: config.toml and trajectory.csv) or the orbit of "
+        "`jaxcrank steady` (orbit.csv): the mechanism moving, "
         "the ideal mechanism dashed beside it, and each clearance joint's pin in its hole with the contact force."
     )
-    p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="a folder written by `jaxcrank simulate`")
+    p.add_argument(
+        "run_dir",
+        type=Path,
+        metavar="RUN_DIR",
+        help="a folder written by `jaxcrank simulate` (or `jaxcrank steady`: its orbit)",
+    )
     p.add_argument(
         "--out", type=Path, help="the animation: .gif, .mp4 (needs ffmpeg) or .html (default RUN_DIR/animation.gif)"
     )
@@ -92,8 +100,9 @@ def add_animate_arguments(p) -> None:
 
 
 def read_run(run_dir: Path):
-    """A run folder's mechanism (``config.toml``) and columns (``trajectory.csv``: the
-    names in its header, SI units, angles in deg).
+    """A run folder's mechanism (``config.toml``) and columns (``trajectory.csv``, or
+    the ``orbit.csv`` of a steady-state run: the names in its header, SI units, angles
+    in deg).
 
     Raises:
         ParameterError: a folder without those files, or a table that does not belong to
@@ -105,19 +114,20 @@ def read_run(run_dir: Path):
     from . import config
 
     run_dir = Path(run_dir)
-    missing = [n for n in ("config.toml", "trajectory.csv") if not (run_dir / n).is_file()]
+    table_file = next((run_dir / n for n in TABLES if (run_dir / n).is_file()), None)
+    missing = [n for n in ("config.toml",) if not (run_dir / n).is_file()]
+    missing += ["trajectory.csv (or a steady run's orbit.csv)"] if table_file is None else []
     if missing:
         raise ParameterError(
-            f"{run_dir}: no {' or '.join(missing)} there: give the folder a `jaxcrank simulate --out` wrote"
+            f"{run_dir}: no {' or '.join(missing)} there: give the folder a `jaxcrank simulate --out` "
+            "(or `jaxcrank steady --out`) wrote"
         )
     mech = config.load(run_dir / "config.toml")
-    with open(run_dir / "trajectory.csv") as fh:
+    with open(table_file) as fh:
         names = fh.readline().strip().split(",")
-    table = np.loadtxt(run_dir / "trajectory.csv", delimiter=",", skiprows=1, ndmin=2)
+    table = np.loadtxt(table_file, delimiter=",", skiprows=1, ndmin=2)
     if table.shape[1] != len(names) or len(table) < 2:
-        raise ParameterError(
-            f"{run_dir / 'trajectory.csv'}: expected a header and at least two rows of {len(names)} numbers"
-        )
+        raise ParameterError(f"{table_file}: expected a header and at least two rows of {len(names)} numbers")
     return mech, {n: table[:, k] for k, n in enumerate(names)}
 
 
