@@ -71,7 +71,6 @@ class Sketch:
                 self.magnify[j.name] = magnify if magnify is not None else 0.3 * u / j.clearance
         self.colours = {b: PALETTE[k % len(PALETTE)] for k, b in enumerate(sorted(lay.parts, key=self._order))}
         self.artists: dict[str, object] = {}
-        self._held: dict[str, float] = {}
         self._made = False
 
     def _order(self, b):
@@ -224,7 +223,7 @@ class Sketch:
             n = np.array([-a[1], a[0]])
             off = float(np.dot(pin - hole, n))
             tilt = geo.angle_of(poses, j.pin[0]) - geo.angle_of(poses, j.hole[0])
-            tilt = math.remainder(float(tilt) - self._joint_angle(j, poses), 2 * math.pi)
+            tilt = math.remainder(float(tilt) - j.angle, 2 * math.pi)
             k = self.magnify.get(j.name, 1.0)
             centre = pin + (k - 1.0) * off * n
             art.set_xy(_rect(centre, axis + k * tilt, 2.2 * u, 1.1 * u))
@@ -250,13 +249,6 @@ class Sketch:
                 c = geo.place(part.centre_of_mass, poses[b])
                 self.artists[f"com:{b}"].set_data([c[0]], [c[1]])
         return moved
-
-    def _joint_angle(self, j, poses) -> float:
-        """The held angle of a prismatic joint (slider body less guide body), rad: read
-        from the first poses seen, so the drawing shows only what the play changes."""
-        if j.name not in self._held:
-            self._held[j.name] = float(geo.angle_of(poses, j.pin[0]) - geo.angle_of(poses, j.hole[0]))
-        return self._held[j.name]
 
     def _slot_span(self, j, poses, hole, a):
         part = self.lay.parts[j.hole[0]]

@@ -65,6 +65,8 @@ class JointSketch:
         law: the law's name.
         direction: a prismatic joint's axis in the guide body's frame, rad (0 for a
             revolute joint).
+        angle: a prismatic joint's held angle, the sliding body's less the guide body's,
+            rad (0 for a revolute joint).
     """
 
     name: str
@@ -74,6 +76,7 @@ class JointSketch:
     clearance: float | None
     law: str
     direction: float = 0.0
+    angle: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,7 +149,9 @@ def layout(mech) -> Layout:
         hole, pin = conn.sites()
         c = None if law.ideal else _number(law.clearance)
         direction = _number(conn.direction) if conn.kind == "prismatic" else 0.0
-        joints.append(JointSketch(j, conn.kind, (hole.body, hole.point), (pin.body, pin.point), c, law.name, direction))
+        held = _number(conn.angle) if conn.kind == "prismatic" else 0.0
+        sides = (hole.body, hole.point), (pin.body, pin.point)
+        joints.append(JointSketch(j, conn.kind, *sides, c, law.name, direction, held))
     ground = {p: _xy(v) for p, v in lk.ground.items()}
     return Layout(lk.name, parts, ground, tuple(joints), lk.driver.body)
 
