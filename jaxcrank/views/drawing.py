@@ -347,8 +347,8 @@ def draw(
     lay = geo.layout(mech)
     start = float(np.asarray(mech.linkage().driver.initial_angle, dtype=float))
     phi = start if angle is None else math.radians(angle)
-    poses = geo.assembled_poses(mech, phi)
-    turn = geo.assembled_poses(mech, phi + np.linspace(0.0, 2.0 * np.pi, 181))
+    turn = geo.assembled_poses(mech, phi + np.linspace(0.0, 2.0 * np.pi, 181))  # one program: the first is phi
+    poses = {b: p[0] for b, p in turn.items()}
     ok = np.all(np.isfinite(np.stack([p[:, 0] for p in turn.values()])), axis=0)
     turn = {b: p[ok] for b, p in turn.items()}
     lo, hi = geo.extent(lay, turn if ok.any() else poses)
