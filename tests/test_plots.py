@@ -68,6 +68,17 @@ def test_a_run_within_one_revolution_is_drawn_whole(n):
     plt.close(fig)
 
 
+def test_an_orbit_of_two_revolutions_is_drawn_whole():
+    """A periodic orbit (``from_rest=False``, as `jaxcrank steady` draws it) has no start-up:
+    two revolutions, nothing shaded, the scale set by every sample."""
+    cols = _columns()
+    steady = np.ones(len(cols["t"]), dtype=bool)
+    fig = plots._contact_forces(cols, jc.paper(), steady=steady)
+    c = _panels(fig)["C"]
+    assert c.get_ylim()[1] >= 50_000.0 and not c.texts and not c.patches
+    plt.close(fig)
+
+
 def test_history_marks_the_reported_best_iterate(tmp_path, monkeypatch):
     from optim import plots as optim_plots
 

@@ -61,11 +61,10 @@ _COORDINATE_ROWS = {
 _IDEAL = {"ls": "--", "color": "k", "lw": 1.1}
 
 
-def _ideal_vs_clearance(cols, mech, body, coordinate, x: Abscissa):
+def _ideal_vs_clearance(cols, body, coordinate, x: Abscissa, steady):
     """3x2 grid: position, velocity, acceleration; left ideal and clearance, right error.
-    The acceleration rows are scaled to the motion after the first revolution (shaded
+    The acceleration rows are scaled to the motion of the ``steady`` samples (shaded
     before), the start-up peak annotated."""
-    steady = after_first_revolution(cols, mech)
     fig, axes = plt.subplots(3, 2, figsize=(8, 7), sharex=True, layout="constrained")
     for row, (suffix, label, scale, unit) in enumerate(_COORDINATE_ROWS[coordinate]):
         real, ideal = cols[f"{body}_{suffix}"] * scale, cols[f"ideal_{body}_{suffix}"] * scale
@@ -88,13 +87,13 @@ def _ideal_vs_clearance(cols, mech, body, coordinate, x: Abscissa):
     return fig
 
 
-def _single(cols, mech, x: Abscissa, series, ylabel, title, unit):
-    """One panel of ``series`` (column, label, style), scaled to the motion after the first
-    revolution (start-up shaded, its peak annotated)."""
+def _single(cols, x: Abscissa, steady, series, ylabel, title, unit):
+    """One panel of ``series`` (column, label, style), scaled to the motion of the
+    ``steady`` samples (start-up shaded, its peak annotated)."""
     fig, ax = plt.subplots(figsize=(8, 3.6), layout="constrained")
     for key, label, style_ in series:
         ax.plot(x.values, cols[key], label=label, **style_)
-    clip_startup(ax, x, [cols[key] for key, _, _ in series], after_first_revolution(cols, mech), unit)
+    clip_startup(ax, x, [cols[key] for key, _, _ in series], steady, unit)
     ax.set_xlabel(x.label)
     x.ticks(ax)
     ax.set_ylabel(ylabel)
@@ -107,16 +106,16 @@ def _clearance_joints(mech) -> list[str]:
     return sorted(j for j, law in mech.joints.items() if not law.ideal)
 
 
-def _contact_forces(cols, mech, x: Abscissa | None = None):
+def _contact_forces(cols, mech, x: Abscissa | None = None, steady=None):
     """The normal force of each joint with clearance at the samples, one panel each, scaled
-    to the motion after the first revolution (start-up shaded, its peak annotated: the
-    largest stored sample; ``summary.json``'s peaks are over every solver step, so they
-    can be larger)."""
+    to the motion of the ``steady`` samples (default: after the first revolution; start-up
+    shaded, its peak annotated: the largest stored sample; ``summary.json``'s peaks are
+    over every solver step, so they can be larger)."""
     x = abscissa(cols, mech) if x is None else x
+    steady = after_first_revolution(cols, mech) if steady is None else steady
     joints = _clearance_joints(mech)
     fig, axes = plt.subplots(len(joints), 1, figsize=(8, 0.6 + 2.6 * len(joints)), sharex=True, squeeze=False,
                              layout="constrained")  # fmt: skip
-    steady = after_first_revolution(cols, mech)
     for k, (ax, joint) in enumerate(zip(axes[:, 0], joints)):
         f = cols[f"force_{joint}_normal"]
         ax.plot(x.values, f, lw=0.7, color=f"C{k}")
@@ -172,12 +171,14 @@ def _transmission(cols, x: Abscissa):
     return fig
 
 
-def figures(cols, mech, *, against: str = "angle") -> dict:
+def figures(cols, mech, *, against: str = "angle", from_rest: bool = True) -> dict:
     """All figures of a run as ``{file name: matplotlib Figure}``, drawn in
     `STYLE`. ``cols``: the columns of
     [`jaxcrank.analysis.outputs.trajectory`][] of a run of ``mech``; ``against``: the
     time series' x axis, ``"angle"`` (the driven body's angle since the start, deg) or
-    ``"time"`` (s) ([`abscissa`][jaxcrank.runs.plots_angle.abscissa]).
+    ``"time"`` (s) ([`abscissa`][jaxcrank.runs.plots_angle.abscissa]); ``from_rest``: the
+    run starts from rest, so its first revolution is a start-up (``False`` for a periodic
+    orbit, drawn whole).
 
     One figure per deviation the mechanism reports (``<body>_<coordinate>.png``: position,
     velocity, acceleration, ideal against clearance), the output link's acceleration, the
@@ -193,32 +194,33 @@ def figures(cols, mech, *, against: str = "angle") -> dict:
         ValueError: if ``against`` is neither ``"angle"`` nor ``"time"``.
     """
     x = abscissa(cols, mech, against)
+    steady = after_first_revolution(cols, mech) if from_rest else np.ones(len(cols["t"]), dtype=bool)
     outputs = mech.linkage().outputs
     out = {}
     with style():
         for body, coordinate in outputs.deviations:
-            out[f"{body}_{coordinate}.png"] = _ideal_vs_clearance(cols, mech, body, coordinate, x)
+            out[f"{body}_{coordinate}.png"] = _ideal_vs_clearance(cols, body, coordinate, x, steady)
         if outputs.acceleration is not None:
             body, coordinate = outputs.acceleration
             suffix, label, _, unit = _COORDINATE_ROWS[coordinate][2]
             series = [(f"{body}_{suffix}", "with clearance", {}), (f"ideal_{body}_{suffix}", "ideal", _IDEAL)]
             out[f"{body}_acceleration.png"] = _single(
-                cols, mech, x, series, f"{label} [{unit}]", f"{body} {label}", unit.replace("$^2$", "²")
+                cols, x, steady, series, f"{label} [{unit}]", f"{body} {label}", unit.replace("$^2$", "²")
             )
         if _clearance_joints(mech):
-            out["contact_force.png"] = _contact_forces(cols, mech, x)
+            out["contact_force.png"] = _contact_forces(cols, mech, x, steady)
         series = [("driving_moment", "with clearance", {}), ("ideal_driving_moment", "ideal", _IDEAL)]
-        out["driving_moment.png"] = _single(cols, mech, x, series, "moment [N m]", "driving moment", "N m")
+        out["driving_moment.png"] = _single(cols, x, steady, series, "moment [N m]", "driving moment", "N m")
         if _clearance_joints(mech):
             out["pin_trajectories.png"] = _pin_trajectories(cols, mech)
         if "transmission_angle" in cols:
             out["transmission_angle.png"] = _transmission(cols, x)
-        out["bearing_loads.png"] = bearing_loads(cols, mech, after_first_revolution(cols, mech))
+        out["bearing_loads.png"] = bearing_loads(cols, mech, steady)
     return out
 
 
-def save_figures(cols, mech, directory, *, against: str = "angle") -> list[Path]:
-    """Write [`figures`][jaxcrank.runs.plots.figures] (``against`` as there) as PNG files
+def save_figures(cols, mech, directory, *, against: str = "angle", from_rest: bool = True) -> list[Path]:
+    """Write [`figures`][jaxcrank.runs.plots.figures] (``against``, ``from_rest`` as there) as PNG files
     into ``directory`` at `DPI`; returns their paths.
 
     Raises:
@@ -227,7 +229,7 @@ def save_figures(cols, mech, directory, *, against: str = "angle") -> list[Path]
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = []
-    for name, fig in figures(cols, mech, against=against).items():
+    for name, fig in figures(cols, mech, against=against, from_rest=from_rest).items():
         path = directory / name
         fig.savefig(path, dpi=DPI)
         plt.close(fig)

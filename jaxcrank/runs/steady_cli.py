@@ -256,7 +256,7 @@ def run(args) -> int:
                 writer.writerow([f"{v:.10g}" for v in row])
         written.append("orbit.csv")
         if not args.no_figures:
-            plots.save_figures(cols, mech, out / "figures")
+            plots.save_figures(cols, mech, out / "figures", from_rest=False)  # an orbit: no start-up
             written.append("figures/")
     if not args.no_figures:
         poincare_plot(steady, out / "poincare_section.png")
