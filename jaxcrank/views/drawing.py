@@ -17,7 +17,7 @@ import math
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.lines import Line2D
-from matplotlib.patches import Circle, Polygon, Rectangle
+from matplotlib.patches import Circle, Polygon
 
 from . import geometry as geo
 from .geometry import GROUND
@@ -123,23 +123,8 @@ class Sketch:
     def _make_revolute(self, j, poses):
         ax, u = self.ax, self.u
         hole, _ = geo.joint_positions(self.lay, poses)[j.name]
-        if GROUND in (j.hole[0], j.pin[0]):  # a fixed pivot: a hatched base under it
-            x, y = hole
-            ax.add_patch(
-                Polygon(
-                    [(x, y), (x - 0.8 * u, y - 1.4 * u), (x + 0.8 * u, y - 1.4 * u)],
-                    fc="0.85",
-                    ec="k",
-                    lw=0.8,
-                    zorder=1,
-                )
-            )
-            ax.add_patch(
-                Rectangle(
-                    (x - 1.2 * u, y - 1.9 * u), 2.4 * u, 0.5 * u, fill=False, hatch="////", lw=0.0, ec="0.3", zorder=1
-                )
-            )
-            ax.plot([x - 1.2 * u, x + 1.2 * u], [y - 1.4 * u] * 2, color="k", lw=1.0, zorder=1)
+        if GROUND in (j.hole[0], j.pin[0]):  # a fixed pivot: a hatched base on the side away from its body
+            self._ground_base(j, hole, poses)
         if j.name in self.magnify:
             self.artists[f"joint:{j.name}"] = ax.add_patch(
                 Circle(hole, 0.75 * u, fc="white", ec=CLEARANCE, lw=1.8, zorder=5, gid=f"joint:{j.name}")
@@ -152,6 +137,27 @@ class Sketch:
             self.artists[f"joint:{j.name}"] = ax.add_patch(
                 Circle(hole, 0.4 * u, fc="white", ec="k", lw=1.2, zorder=5, gid=f"joint:{j.name}")
             )
+
+    def _ground_base(self, j, at, poses):
+        """A fixed pivot's base at ``at``: a triangle and a hatched strip below it, or, where
+        the body it carries lies below, turned to the side away from that body."""
+        ax, u = self.ax, self.u
+        body = j.pin[0] if j.hole[0] == GROUND else j.hole[0]
+        part = self.lay.parts[body]
+        centre = np.mean(geo.place(np.array(list(part.points.values())), poses[body]), axis=0) - at
+        down = np.array([0.0, -1.0])
+        if np.hypot(*centre) > 1e-12 and np.dot(centre, down) > 0.5 * np.hypot(*centre):  # the body hangs below
+            down = -down
+        side = np.array([-down[1], down[0]])
+
+        def pts(*uv):
+            return [at + u * (a * side + b * down) for a, b in uv]
+
+        ax.add_patch(Polygon(pts((0, 0), (-0.8, 1.4), (0.8, 1.4)), fc="0.85", ec="k", lw=0.8, zorder=1))
+        strip = pts((-1.2, 1.4), (1.2, 1.4), (1.2, 1.9), (-1.2, 1.9))
+        ax.add_patch(Polygon(strip, fill=False, hatch="////", lw=0.0, ec="0.3", zorder=1))
+        ends = np.array(pts((-1.2, 1.4), (1.2, 1.4)))
+        ax.plot(ends[:, 0], ends[:, 1], color="k", lw=1.0, zorder=1)
 
     def _make_prismatic(self, j, poses):
         ax, u = self.ax, self.u
