@@ -20,7 +20,7 @@ from matplotlib.animation import FFMpegWriter, FuncAnimation
 from .._private import mark_animation_started
 from ..physics.params import ParameterError
 from . import geometry as geo
-from .drawing import CLEARANCE, Sketch
+from .drawing import CLEARANCE, Sketch, fit
 
 #: the file types [`save`][jaxcrank.views.animation.save] writes, by suffix
 FORMATS = (".gif", ".mp4", ".html")
@@ -131,21 +131,10 @@ def animate(
         ax = fig.add_subplot(grid[:, 0])
     else:
         ax = fig.add_axes((0.08, 0.1, 0.88, 0.8))
-    u = max(float(np.max(hi - lo)), 1e-9) / 30.0
-    pad = 3.5 * u
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    ax.set_aspect("equal")
+    travel = fit(ax, lay, (lo, hi), ideal)
     ax.set_xlabel("x [m]", fontsize=8)
     ax.tick_params(labelsize=7)
     ax.grid(True, lw=0.3, alpha=0.5)
-    travel = {}
-    for j in lay.joints:
-        if j.kind == "prismatic" and j.hole[0] == geo.GROUND:
-            s = (geo.site(lay, ideal, j.pin) - geo.site(lay, ideal, j.hole)) @ np.array(
-                [math.cos(j.direction), math.sin(j.direction)]
-            )
-            travel[j.name] = (float(s.min()) - 2.0 * u, float(s.max()) + 2.0 * u)
     sketches = [Sketch(ax, lay, (lo, hi), travel=travel, ghost=True)] if ghost else []
     main = Sketch(ax, lay, (lo, hi), travel=travel, magnify=magnify, labels="joints")
     sketches.append(main)

@@ -317,6 +317,26 @@ class Sketch:
         return ("clearance joints (red), play drawn magnified: " + ", ".join(parts)) if parts else ""
 
 
+def fit(ax, lay, span, poses=None) -> dict:
+    """Frame ``ax`` on ``span`` (``(lower_left, upper_right)``, m) with a margin, equal
+    aspect; return each fixed rail's travel along its axis (m) over the instants of
+    ``poses`` (per body (n, 3)), for [`Sketch`][jaxcrank.views.drawing.Sketch]."""
+    lo, hi = span
+    u = _unit(lo, hi)
+    pad = 3.5 * u
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    travel = {}
+    for j in lay.joints if poses is not None else ():
+        if j.kind == "prismatic" and j.hole[0] == GROUND:
+            s = (geo.site(lay, poses, j.pin) - geo.site(lay, poses, j.hole)) @ np.array(
+                [math.cos(j.direction), math.sin(j.direction)]
+            )
+            travel[j.name] = (float(s.min()) - 2.0 * u, float(s.max()) + 2.0 * u)
+    return travel
+
+
 def draw(
     mech,
     angle: float | None = None,
@@ -361,17 +381,7 @@ def draw(
     if ax is None:
         fig, ax = plt.subplots(figsize=(7.0, 5.0), layout="constrained")
     fig = ax.figure
-    u = _unit(lo, hi)
-    travel = {}
-    for j in lay.joints:
-        if j.kind == "prismatic" and j.hole[0] == GROUND and ok.any():
-            hole, pin = geo.site(lay, turn, j.hole), geo.site(lay, turn, j.pin)
-            s = (pin - hole) @ np.array([math.cos(j.direction), math.sin(j.direction)])
-            travel[j.name] = (float(s.min()) - 2.0 * u, float(s.max()) + 2.0 * u)
-    pad = 3.5 * u
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    ax.set_aspect("equal")
+    travel = fit(ax, lay, (lo, hi), turn if ok.any() else None)
     sketch = Sketch(ax, lay, (lo, hi), travel=travel, magnify=magnify, labels=labels, frames=frames)
     if paths and ok.any():
         for j in lay.joints:
