@@ -17,7 +17,7 @@ def build(name: str, objective: dict):
 
     jax.config.update("jax_enable_x64", True)
     from optim.design import design_problem
-    from optim.objective import objective_from_config
+    from optim.objective_config import objective_from_config
     from optim.presets import paper_problem
 
     obj = objective_from_config({"method": "ensemble", **objective})

@@ -16,7 +16,7 @@ value) over the scaled box [0, 1]^9 from the problem's start design, with the sa
 
 - ``ours_adam``: the library's way in and projected Adam (`LEARNING_RATE`). The start and then
   scrambled Sobol points are classified until one is periodic and the lowest value so far
-  (:func:`optim.starts.periodic_start`, at most `CLASSIFY`; else the lowest periodic one); from
+  (:func:`optim.way_in.periodic_start`, at most `CLASSIFY`; else the lowest periodic one); from
   it, Adam on the exact steady-state gradient with the regime guard
   (:class:`optim.steady.RegimeGuard`), the classification's orbit carried in.
 - ``ours_lbfgs``: the same with projected L-BFGS (:class:`optim.optimizers.ProjectedLBFGS`).
@@ -112,7 +112,7 @@ def build(name: str):
     import equinox as eqx
 
     from optim.design import design_problem
-    from optim.objective import objective_from_config
+    from optim.objective_config import objective_from_config
 
     stroke, rpm = PROBLEMS[name]
     problem = design_problem(objective_from_config({"method": "steady_state", **STEADY}))

@@ -84,7 +84,7 @@ def main(argv=None):
     from jaxcrank.numerics.steady import SteadyStateError
     from jaxcrank.physics import ideal
     from optim.design import design_problem
-    from optim.objective import objective_from_config
+    from optim.objective_config import objective_from_config
     from optim.steady import SteadyEvaluator
 
     problem = design_problem(

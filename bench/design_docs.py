@@ -399,7 +399,7 @@ def _methods(d, methods) -> str:
     words = {
         "ours_adam": "ours, the library's way in and its default optimiser: the start and then scrambled Sobol "
         f"points are classified until one is periodic with the lowest value so far (at most {d['classify_at_most']}, "
-        "else the lowest periodic one: `optim.starts.periodic_start`), then projected Adam "
+        "else the lowest periodic one: `optim.way_in.periodic_start`), then projected Adam "
         f"(step {d['learning_rate_adam']:g} in scaled units) "
         "on the exact steady-state gradient with the regime guard, the classification's orbit carried in",
         "ours_lbfgs": "ours with L-BFGS: the same with projected L-BFGS",

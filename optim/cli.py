@@ -9,7 +9,7 @@ the box with the optimiser's path; it costs N^2 solves (docs/optimisation.md tim
 it). With ``--starts N`` (N > 1) each start runs in ``start_NNN/`` (its own checkpoint
 and history) and ``multistart.json`` lists the starts; the top-level files describe
 the best run ([`optim.starts.multistart`][]). With one start and the steady-state
-objective, the run first finds a periodic start ([`optim.starts.periodic_start`][]).
+objective, the run first finds a periodic start ([`optim.way_in.periodic_start`][]).
 
 ``result.json`` holds: the problem and method; ``converged`` (true when a stopping
 test was met) and ``stop_reason`` (the test, or why the run stopped without meeting one: the
@@ -54,7 +54,7 @@ from jaxcrank import cache
 from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
 
-from .objective import objective_config, objective_from_config
+from .objective_config import objective_config, objective_from_config
 from .optimize import STEADY_LEARNING_RATE, Settings, default_settings, optimize
 from .optimizers import OPTIMIZERS, from_settings
 from .presets import PROBLEMS, paper_reference
@@ -89,7 +89,11 @@ def add_arguments(p):
     p.add_argument(
         "--resume", action="store_true", help="continue the run in --out from its last checkpoint (--out must exist)"
     )
-    p.add_argument("--problem", choices=sorted(PROBLEMS), help="problem preset (overrides the config's)")
+    p.add_argument(
+        "--problem",
+        help=f"a problem preset ({', '.join(sorted(PROBLEMS))}; overrides the config's) or a problem file "
+        "(FILE.toml: any mechanism, objective and constraints; docs page 'Design your own mechanism')",
+    )
     p.add_argument(
         "--method",
         choices=sorted(OPTIMIZERS),
@@ -174,7 +178,9 @@ def _fields(cls, section, values):
 def build(cfg) -> tuple[Problem, Settings]:
     name = cfg.get("problem", "paper")
     if name not in PROBLEMS:
-        raise ParameterError(f"problem {name!r} is unknown; valid: {', '.join(PROBLEMS)}")
+        raise ParameterError(
+            f"problem {name!r} is unknown; valid: {', '.join(PROBLEMS)}, or a problem file (a path ending in .toml)"
+        )
     section = cfg.get("objective", {})
     design = dict(cfg.get("design", {}))
     kwargs = {"objective": objective_from_config(section)} if section else {}

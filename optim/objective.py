@@ -1,7 +1,7 @@
 """The objectives of design problems: each kind a final Module of
 [`AbstractObjective`][optim.objective.AbstractObjective] (`Pathwise` here, `Ensemble` in
 [`optim.ensemble`][], `Steady` in [`optim.steady`][]), and the ``[objective]`` tables of
-config files that describe them ([`objective_from_config`][optim.objective.objective_from_config]).
+config files that describe them ([`optim.objective_config`][]).
 
 An objective evaluates the RMS metrics of a mechanism (the names its description gives,
 [`jaxcrank.physics.signals.rms_metrics`][], units in the name: the paper's Eq. 19
@@ -38,7 +38,6 @@ import dataclasses
 import math
 from typing import NamedTuple
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -257,71 +256,6 @@ class Pathwise(AbstractObjective):
 
     def describe(self) -> dict:
         return {"kind": "pathwise", **_fields(self), **options_fields(self.options)}
-
-
-def _check_keys(values: dict, valid: set) -> None:
-    bad = set(values) - valid
-    if bad:
-        raise ParameterError(f"unknown [objective] keys {sorted(bad)}; valid: {sorted(valid)}")
-
-
-def objective_from_config(section: dict) -> AbstractObjective:
-    """The objective of an ``[objective]`` table: ``method`` ("ensemble" by default,
-    "pathwise" or "steady_state") and the flat keys of that objective's
-    ``describe()``: its fields, the solve's ``solver``/``rtol``/``atol``/``dt0``/``max_steps``
-    (an ensemble's windows: the same with ``window_``; they follow the solve's rtol/atol
-    unless given), and a steady state's settings; ``window_gradient`` ("forward" or
-    "reverse") picks an ensemble's window adjoint, ``on_failure`` ("raise" or "nan") its
-    ``throw``.
-
-    Raises:
-        ParameterError: for an unknown method, key or value (the message lists the valid ones)."""
-    from .ensemble import WINDOW_DEFAULTS, Ensemble
-    from .steady import STEADY_OBJECTIVE, Steady
-
-    values = dict(section)
-    kind = values.pop("method", "ensemble")
-    kinds = {"ensemble": Ensemble, "pathwise": Pathwise, "steady_state": Steady}
-    if kind not in kinds:
-        raise ParameterError(f"objective method {kind!r} is unknown; valid: 'ensemble', 'pathwise', 'steady_state'")
-    if "on_failure" in values:
-        mode = values.pop("on_failure")
-        if mode not in ("raise", "nan"):
-            raise ParameterError(f"objective on_failure {mode!r} is unknown; valid: 'raise', 'nan'")
-        values["throw"] = mode == "raise"
-    if "window_gradient" in values:
-        values["window_adjoint"] = values.pop("window_gradient")
-    _check_keys(values, set(kinds[kind]().describe()) - {"kind"})
-    if kind == "steady_state":
-        if isinstance(values.get("trend"), dict):
-            values["trend"] = objective_from_config(values["trend"])
-        solve = options_from_fields(values, STEADY_OBJECTIVE.solve)
-        steady = {k: values.pop(k) for k in list(values) if k not in ("trend", "throw")}
-        return Steady(options=dataclasses.replace(STEADY_OBJECTIVE, solve=solve, **steady), **values)
-    if "window_adjoint" in values:
-        mode = values.pop("window_adjoint")
-        adjoints = {"forward": diffrax.ForwardMode(), "reverse": diffrax.RecursiveCheckpointAdjoint()}
-        if mode not in adjoints:
-            raise ParameterError(f"objective window_gradient {mode!r} is unknown; valid: 'forward', 'reverse'")
-        values["window_adjoint"] = adjoints[mode]
-    values["options"] = options_from_fields(values, DEFAULTS)
-    if kind == "ensemble":
-        base = WINDOW_DEFAULTS.replace(rtol=values["options"].rtol, atol=values["options"].atol)
-        values["window_options"] = options_from_fields(values, base, "window_")
-    return kinds[kind](**values)
-
-
-def objective_config(objective: AbstractObjective) -> dict:
-    """The ``[objective]`` table of ``objective`` ([`objective_from_config`][optim.objective.objective_from_config]
-    reads it back)."""
-    d = objective.describe()
-    out = {"method": d.pop("kind")}
-    if "window_adjoint" in d:
-        out["window_gradient"] = d.pop("window_adjoint")
-    out["on_failure"] = "raise" if d.pop("throw") else "nan"
-    if "trend" in d:  # the steady-state objective's trend estimate: an [objective.trend] table
-        d["trend"] = None if objective.trend is None else objective_config(objective.trend)
-    return {**out, **d}
 
 
 def eq19(objective: AbstractObjective, mech: Mechanism) -> Float[Array, ""]:

@@ -49,6 +49,7 @@ from .objective import value_and_grad
 from .optimizers import LBFGS, AbstractLineSearchOptimizer, AbstractOptimizer, adam
 from .problem import AbstractProblem
 from .steady import NOT_PERIODIC, RegimeGuard, Steady, SteadyEvaluator, not_periodic_reason
+from .way_in import periodic_start
 
 #: Adam's step (scaled design units) in the steady-state objective's default settings, chosen by
 #: the design head-to-head over a family of problems (docs/design-studies.md)
@@ -198,13 +199,13 @@ def optimize(
     Args:
         settings: the optimiser settings (default [`default_settings`][optim.optimize.default_settings]).
             With none given, a steady-state objective, no ``evaluator`` and no ``resume``, the run first
-            finds a periodic start ([`optim.starts.periodic_start`][]: the problem's start, then Sobol
+            finds a periodic start ([`optim.way_in.periodic_start`][]: the problem's start, then Sobol
             points), since the gradient is exact only in the periodic regime.
         out: run directory for ``checkpoint.npz`` and ``history.csv`` (no checkpoints when None).
         resume: continue from ``out``'s checkpoint (error if there is none).
         stop_after: stop (as if killed) after this many iterations of this call (tests).
         evaluator: steady-state objective only: the evaluator to use, e.g. the one that classified
-            the start ([`optim.starts.periodic_start`][]), whose last orbit warm-starts the first
+            the start ([`optim.way_in.periodic_start`][]), whose last orbit warm-starts the first
             evaluation (default: a new one).
 
     Returns a dict: ``history`` (one dict per iteration, columns of
@@ -216,14 +217,12 @@ def optimize(
     ``last`` (the last iterate, SI) and ``seconds`` (wall time, s: ``start``, the start's evaluation, and
     ``iterations``, the iterations of this call; steady-state objective: ``gradient_compile``, the part of
     both spent compiling gradient programs), and ``start_search`` when the run looked for a periodic start
-    ([`optim.starts.StartSearch.describe`][]; its classification time in ``seconds["start_search"]``).
+    ([`optim.way_in.StartSearch.describe`][]; its classification time in ``seconds["start_search"]``).
     """
     found = None
     if settings is None:
         settings = default_settings(problem)
         if isinstance(problem.objective, Steady) and evaluator is None and not resume:
-            from .starts import periodic_start
-
             found = periodic_start(problem, seed=settings.seed, progress=progress)
             problem, evaluator = found.problem, found.evaluator
     opt = settings.optimizer

@@ -42,7 +42,7 @@ from jaxcrank.numerics.results import Regime
 from jaxcrank.numerics.shooting import SteadyOptions, period_solve
 from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
 from jaxcrank.physics.params import ParameterError
-from jaxcrank.physics.signals import rms_metrics
+from jaxcrank.physics.signals import metric_definitions, rms_metrics
 
 from .ensemble import Ensemble
 from .objective import AbstractObjective, options_fields, value_and_grad
@@ -88,13 +88,15 @@ class Steady(AbstractObjective):
             jaxcrank.SteadyStateError: the solve failed and ``throw`` is True."""
         return S.steady_state(mech, self.options, warm_start=warm_start, throw=self.throw)
 
-    def rms_at(self, mech: Mechanism, steady: S.SteadyState) -> dict[str, Float[Array, ""]]:
+    def rms_at(self, mech: Mechanism, steady: S.SteadyState, every: bool = False) -> dict[str, Float[Array, ""]]:
         """The RMS metrics of ``mech`` (traceable; e.g. built from traced design
         variables) given ``steady``, the steady state of its concrete value: periodic, the
         metrics over one period from [`jaxcrank.numerics.steady.orbit_start`][] (exact
         forward-mode gradient); not periodic, the long-run statistics' values with the
-        ``trend`` objective's gradient (or none); NaN when the solve failed."""
-        names = rms_metrics(mech)
+        ``trend`` objective's gradient (or none); NaN when the solve failed. ``every``: all
+        the headline metrics ([`jaxcrank.physics.signals.metric_definitions`][]: the peaks too;
+        not periodic, the peaks' long-run values have no gradient)."""
+        names = tuple(metric_definitions(mech)) if every else rms_metrics(mech)
         if not steady.ok:
             return {k: jnp.asarray(jnp.nan) for k in names}
         if steady.periodic:
@@ -112,7 +114,7 @@ class Steady(AbstractObjective):
             return values
         _, starts = self.trend.reference(jax.lax.stop_gradient(mech))
         surrogate = self.trend.pooled(mech, starts)
-        return {k: straight_through(values[k], surrogate[k]) for k in names}
+        return {k: straight_through(values[k], surrogate[k]) if k in surrogate else values[k] for k in names}
 
     def rms(self, mech: Mechanism) -> dict[str, Float[Array, ""]]:
         """The RMS metrics of a concrete ``mech`` ([`solve`][optim.steady.Steady.solve] then
@@ -310,7 +312,7 @@ def not_periodic_reason(problem, x) -> str:
     design = ", ".join(f"{n} = {v:.6g}" for n, v in zip(problem.names, np.asarray(x)))
     return (
         f"not periodic at {design}: the steady-state gradient there is exactly zero (no trend estimate), which "
-        "says nothing about optimality; start from a periodic design (optim.starts.periodic_start finds one; "
+        "says nothing about optimality; start from a periodic design (optim.way_in.periodic_start finds one; "
         "optimize(problem) with no settings runs it first; jaxcrank optimize does with one start) or give Steady "
         "a trend objective (Steady(trend=Ensemble()))"
     )

@@ -269,7 +269,7 @@ def test_objective_tables_map_flat_keys_onto_the_options_objects_and_round_trip(
     and objective_config writes a table that builds the same objective."""
     import diffrax
 
-    from optim.objective import objective_config, objective_from_config
+    from optim.objective_config import objective_config, objective_from_config
 
     obj = objective_from_config(table)
     assert objective_from_config(objective_config(obj)) == obj

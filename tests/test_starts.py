@@ -138,7 +138,7 @@ def test_optimize_with_no_settings_finds_a_periodic_start_and_keeps_to_the_perio
     from optim import optimize as O
 
     made = _patch(monkeypatch)
-    monkeypatch.setattr("optim.starts.SteadyEvaluator", lambda problem: made.append(_Evaluator(problem)) or made[-1])
+    monkeypatch.setattr("optim.way_in.SteadyEvaluator", lambda problem: made.append(_Evaluator(problem)) or made[-1])
     prob = _start(steady_problem(), [0.1, 0.1, 0.9])  # not periodic: a zero gradient there
     settings = O.default_settings(prob)
     assert settings.optimizer.label == "adam" and isinstance(settings.guard, RegimeGuard)

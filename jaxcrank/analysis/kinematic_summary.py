@@ -23,7 +23,7 @@ from ..physics.linkage import GROUND, AbstractMechanism, Linkage
 from ..physics.params import ParameterError
 from ..physics.topology import Skeleton
 
-__all__ = ["format_summary", "grashof_loops", "kinematic_summary"]
+__all__ = ["format_summary", "four_bar_cycles", "grashof_loops", "kinematic_summary"]
 
 DEG = 180.0 / math.pi
 #: relative tolerance of a change-point four-bar: |(s + l) - (p + q)| <= CHANGE_POINT_RTOL (p + q)
@@ -209,15 +209,26 @@ def grashof_loops(mech: AbstractMechanism | Model | Linkage) -> list[dict]:
         One dict per loop, sorted by joint names; a loop through the ground starts at a
         ground pivot (the driven body's, where it is in the loop), away from the ground.
     """
-    lk = mech.linkage if isinstance(mech, Model) else mech if isinstance(mech, Linkage) else mech.linkage()
-    sk = Skeleton.of(lk)
+    lk = _linkage(mech)
+    return [_classify(lk, cycle) for cycle in four_bar_cycles(lk)]
+
+
+def _linkage(mech) -> Linkage:
+    return mech.linkage if isinstance(mech, Model) else mech if isinstance(mech, Linkage) else mech.linkage()
+
+
+def four_bar_cycles(mech: AbstractMechanism | Model | Linkage) -> list[list[tuple[str, str]]]:
+    """Every loop of four revolute joints and four distinct links, as ``[(joint, body after
+    it), ...]`` around the loop (a loop through the ground starts at a ground pivot, the
+    driven body's where it is in the loop), sorted by joint names; from the description alone.
+
+    Args:
+        mech: a mechanism, a compiled model or a written-out linkage.
+    """
+    sk = Skeleton.of(_linkage(mech))
     edges = [(j, *sk.ends(j)) for j, kind, *_ in sk.connections if kind == "revolute"]
-    loops = []
-    for combo in itertools.combinations(edges, 4):
-        cycle = _cycle(combo, sk.driver_body)
-        if cycle is not None:
-            loops.append(_classify(lk, cycle))
-    return sorted(loops, key=lambda loop: loop["joints"])
+    cycles = [_cycle(combo, sk.driver_body) for combo in itertools.combinations(edges, 4)]
+    return sorted((c for c in cycles if c is not None), key=lambda c: [j for j, _ in c])
 
 
 def _cycle(combo, driver: str) -> list[tuple[str, str]] | None:

@@ -246,6 +246,10 @@ def main(argv=None) -> int:
 
             return regimes_cli.run(args)
         if args.command == "optimize":
+            if (args.problem or "").endswith(".toml"):  # a problem file: optim.file_cli
+                from optim import file_cli
+
+                return file_cli.run(args)
             from optim import cli as optim_cli
 
             return optim_cli.run(args)

@@ -1,0 +1,155 @@
+"""``jaxcrank optimize --problem FILE.toml``: a design problem described as data ([`optim.spec`][]),
+minimised under its constraints ([`optim.constrained`][]).
+
+The run folder gets ``problem.toml`` (a copy of the file), ``round_NN/`` (each round's
+checkpoint and history), ``rounds.json`` (the finished rounds: ``--resume`` continues after
+them), ``history.csv`` (every iterate with each term's and constraint's value, units in the
+quantity's name), ``history.png`` (the objective and each constraint per iterate, its bounds
+shaded) and ``result.json``:
+
+- ``problem``, ``names``, ``method``, ``feasible`` (every constraint holds at the final design);
+- ``objective_start`` and ``objective_final`` (the weighted sum of the terms + cost);
+- ``objectives``: per term, ``quantity``, ``weight``, ``start`` and ``value`` (final), ``lower``
+  and ``upper`` (None), ``satisfied`` (True);
+- ``constraints``: per constraint, ``quantity``, ``lower``, ``upper``, ``start``, ``value``
+  (final), ``start_satisfied`` and ``satisfied``;
+- ``start_design_SI``, ``final_design_SI``, ``final_parameters_SI`` (every mechanism parameter the
+  design sets, derived lengths' points and mass properties included), ``final_mechanism`` and
+  ``simulate_command`` (as ``jaxcrank optimize`` writes them for a preset problem);
+- ``rounds`` (the augmented Lagrangian's), ``iterations``, ``start_search`` (the way in) and
+  ``seconds`` (``way_in``, ``gradient_compile``, ``total``).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import shutil
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from jaxcrank import cache  # noqa: E402
+from jaxcrank.physics.params import ParameterError  # noqa: E402
+
+from . import constrained, spec  # noqa: E402
+from .cli import STEADY_OPTIMIZER, _final_mechanism, settings_from_config  # noqa: E402
+
+#: the ``[optimizer]`` keys of the augmented Lagrangian (the others are the optimiser's)
+ROUND_KEYS = ("rounds", "penalty", "growth")
+
+
+def settings(table: dict):
+    """The optimiser settings and the rounds of an ``[optimizer]`` table: the steady-state
+    default (Adam with the regime guard) changed by its keys."""
+    from .steady import RegimeGuard
+
+    values = dict(table)
+    rounds = constrained.Rounds(**{k: values.pop(k) for k in ROUND_KEYS if k in values})
+    values = values if "method" in values else {**STEADY_OPTIMIZER, **values}
+    return dataclasses.replace(settings_from_config(values), guard=RegimeGuard()), rounds
+
+
+def run(args) -> int:
+    """Run ``jaxcrank optimize --problem FILE.toml`` (the parsed command line ``args``)."""
+    from jaxcrank import config as mech_config
+
+    path = Path(args.problem)
+    if not path.exists():
+        raise ParameterError(f"--problem {path}: no such problem file")
+    problem, tables = spec.load(path)
+    table = dict(tables["optimizer"])
+    if args.method is not None:
+        table["method"] = args.method
+    if args.iterations is not None:
+        table["max_iterations"] = args.iterations
+    opt, rounds = settings(table)
+    out = args.out
+    mech_config.check_resume(out, args.resume)
+    if not args.resume and (out / "rounds.json").exists():
+        raise ParameterError(f"{out} already holds a run (rounds.json): pass --resume or choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.no_cache:
+        try:
+            cache.enable(args.cache_dir)
+        except OSError as err:
+            print(f"jaxcrank optimize: no compilation cache ({err})", file=sys.stderr)
+    if path.resolve() != (out / "problem.toml").resolve():
+        shutil.copyfile(path, out / "problem.toml")
+    if not args.quiet:
+        print(f"optimize: {problem.description}: classifying starts (compiling on a first run)", file=sys.stderr)
+    res = constrained.solve(problem, opt, rounds, out=out, resume=args.resume, progress=not args.quiet)
+    write_history(out / "history.csv", res["history"])
+    plot_history(problem, res["history"], out / "history.png")
+    start, final = res["start"], res["final"]
+    result = {
+        "problem": problem.description,
+        "names": list(problem.names),
+        "method": f"augmented Lagrangian around {opt.optimizer.label}",
+        "feasible": res["feasible"],
+        "objective_start": start["objective"],
+        "objective_final": final["objective"],
+        "objectives": [{**f, "start": s["value"]} for f, s in zip(final["objectives"], start["objectives"])],
+        "constraints": [
+            {**f, "start": s["value"], "start_satisfied": s["satisfied"]}
+            for f, s in zip(final["constraints"], start["constraints"])
+        ],
+        "start_design_SI": start["design_SI"],
+        "final_design_SI": final["design_SI"],
+        **_final_mechanism(problem, final["design_SI"], out),
+        "rounds": res["rounds"],
+        "iterations": len(res["history"]),
+        "start_search": res["start_search"],
+        "seconds": res["seconds"],
+    }
+    (out / "result.json").write_text(json.dumps(result, indent=2))
+    print(f"{problem.description}: objective {start['objective']:.6g} -> {final['objective']:.6g}")
+    for c in result["constraints"]:
+        lo, hi = (-math.inf if c["lower"] is None else c["lower"]), (math.inf if c["upper"] is None else c["upper"])
+        bounds = f"[{lo:g}, {hi:g}]"
+        print(f"  {c['quantity']} = {c['value']:.6g} in {bounds}: {'satisfied' if c['satisfied'] else 'VIOLATED'}")
+    print(f"simulate the final design: {result['simulate_command']}")
+    return 0
+
+
+def write_history(path: Path, history: list[dict]) -> None:
+    """Every iterate of every round, one row each (the union of the rows' columns)."""
+    cols = list(dict.fromkeys(k for h in history for k in h))
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        w.writerows(history)
+
+
+def plot_history(problem, history: list[dict], png: Path) -> None:
+    """The objective and every constrained quantity per iterate, the rounds' starts marked and
+    each constraint's feasible band shaded; saved to ``png``."""
+    panels = 1 + len(problem.constraints)
+    fig, axes = plt.subplots(panels, 1, figsize=(6.5, 2.2 + 1.8 * panels), sharex=True, squeeze=False)
+    axes = axes[:, 0]
+    it = list(range(len(history)))
+    axes[0].plot(it, [h.get("f", float("nan")) for h in history], "o-", ms=3)
+    axes[0].set_ylabel("objective")
+    axes[0].set_title(problem.description, fontsize=9)
+    for ax, (q, lo, hi, _) in zip(axes[1:], problem.constraints):
+        ax.plot(it, [h.get(f"constraint:{q}", float("nan")) for h in history], "o-", ms=3, color="C1")
+        ymin, ymax = ax.get_ylim()
+        ax.axhspan(ymin if lo is None else lo, ymax if hi is None else hi, color="C2", alpha=0.15, label="allowed")
+        ax.set_ylim(ymin, ymax)
+        ax.set_ylabel(q.replace("kinematics.", ""), fontsize=8)
+        ax.legend(fontsize=7, loc="best")
+    starts = [i for i, h in enumerate(history) if h.get("iteration") == 0]
+    for ax in axes:
+        for i in starts:
+            ax.axvline(i, color="0.7", lw=0.8)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("iterate (grey lines: a round of new multipliers starts)")
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
