@@ -16,9 +16,8 @@ def build(name: str, objective: dict):
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from optim.design import design_problem
     from optim.objective_config import objective_from_config
-    from optim.presets import paper_problem
+    from optim.presets import design_problem, paper_problem
 
     obj = objective_from_config({"method": "ensemble", **objective})
     if name.startswith("paper"):

@@ -8,7 +8,7 @@ and ``design.png``. A part that exists is not run again (a killed run loses only
 progress). Run parts pinned to one core each (``taskset -c 0 ...``, ``taskset -c 1 ...``): the
 budgets are CPU time of the method's process, so other load on the machine does not decide.
 
-**Problems** (`PROBLEMS`): the nine-variable design problem (:func:`optim.design.design_problem`)
+**Problems** (`PROBLEMS`): the nine-variable design problem (:func:`optim.presets.design_problem`)
 at its preset stroke and crank speed, and variants of both. Every method optimises the same
 steady-state objective (:class:`optim.steady.Steady` at `STEADY`: Eq. 19 and the design terms
 over one period of the periodic orbit; outside the periodic regime the long-run statistical
@@ -111,8 +111,8 @@ def build(name: str):
 
     import equinox as eqx
 
-    from optim.design import design_problem
     from optim.objective_config import objective_from_config
+    from optim.presets import design_problem
 
     stroke, rpm = PROBLEMS[name]
     problem = design_problem(objective_from_config({"method": "steady_state", **STEADY}))

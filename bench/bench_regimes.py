@@ -33,8 +33,7 @@ from jaxcrank.numerics.kernel import engine as kernel_engine
 from jaxcrank.numerics.steady import SteadyOptions, steady_state
 from jaxcrank.physics.parameters import get_parameter, set_parameters
 from jaxcrank.runs import regimes
-from optim.design import design_problem
-from optim.presets import NOT_PERIODIC_SI
+from optim.presets import NOT_PERIODIC_SI, design_problem
 
 jax.config.update("jax_enable_x64", True)
 ROOT = Path(__file__).resolve().parent

@@ -83,8 +83,8 @@ def main(argv=None):
 
     from jaxcrank.numerics.steady import SteadyStateError
     from jaxcrank.physics import ideal
-    from optim.design import design_problem
     from optim.objective_config import objective_from_config
+    from optim.presets import design_problem
     from optim.steady import SteadyEvaluator
 
     problem = design_problem(

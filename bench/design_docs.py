@@ -685,13 +685,13 @@ def main(argv=None):
         "",
         "## The design problem",
         "",
-        "`optim.design.design_problem()` (preset `design` in `jaxcrank optimize --problem design` and in the "
+        "`optim.presets.design_problem()` (preset `design` in `jaxcrank optimize --problem design` and in the "
         "optimisation TOML) has nine variables: rod length, the ideal mechanism's minimum transmission angle "
         "(crank length and offset follow from the target stroke, 240 mm in the preset), radial clearances at B "
         "and C (with the reciprocal manufacturing cost), rod mass, rod inertia ratio J2 / (m2 L2^2), slider "
         "mass, the bearings' friction coefficient and the rod bearings' Young's modulus. The stroke (within "
         "0.1 mm; exact to rounding), the minimum transmission angle >= 40 deg and assemblability hold at every "
-        "design of the box by construction (`optim/design.py` explains the reparametrisation). The value is "
+        "design of the box by construction (`optim/geometry.py` explains the reparametrisation). The value is "
         "Eq. 19 plus weighted RMS slider deviation, driving-moment deviation and contact force, plus the "
         "clearance cost; its default objective is the steady state (`optim.steady.Steady`): the terms over one "
         "period of the periodic orbit the mechanism settles into "

@@ -3,7 +3,7 @@ accuracy / manufacturing-cost Pareto front.
 
 ``python bench/design_study.py [--out bench/results/design_study.json] [--iterations 60]``
 
-1. Projected Adam (:func:`optim.optimize.optimize`) on :func:`optim.design.design_problem`
+1. Projected Adam (:func:`optim.optimize.optimize`) on :func:`optim.presets.design_problem`
    with the benchmark's evaluation window (:data:`_window_design.OBJECTIVE`), and CMA-ES
    from the same start on the common evaluator; the better of the two is the optimum.
 2. Interior check: the common forward evaluator of ``_window_design`` at the best

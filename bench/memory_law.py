@@ -29,8 +29,7 @@ from jaxcrank.numerics.shooting import STEADY_DEFAULTS
 from jaxcrank.physics import memory
 from jaxcrank.runs import config
 from jaxcrank.runs.regimes import classify
-from optim.design import design_problem
-from optim.presets import ADAM_RUNS_SI, NOT_PERIODIC_SI
+from optim.presets import ADAM_RUNS_SI, NOT_PERIODIC_SI, design_problem
 
 ROOT = Path(__file__).resolve().parent
 PERTURBATION = 1e-15

@@ -30,8 +30,7 @@ from _common import machine
 import jaxcrank as jc
 from jaxcrank.physics import memory
 from jaxcrank.runs import config
-from optim.design import design_problem
-from optim.presets import ADAM_RUNS_SI
+from optim.presets import ADAM_RUNS_SI, design_problem
 
 ROOT = Path(__file__).resolve().parent
 PERTURBATION = 1e-15

@@ -72,7 +72,7 @@ import jaxcrank as jc
 from jaxcrank.numerics.steady import carry_state, steady_value_and_grad
 from jaxcrank.physics import model
 from jaxcrank.runs.regimes import classify
-from optim.design import design_problem
+from optim.presets import design_problem
 
 KEY = "rms_transmission_angle_error_deg"
 ROOT = Path(__file__).resolve().parent

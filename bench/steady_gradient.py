@@ -1,6 +1,6 @@
 """Exact steady-state gradients against finite differences, and warm-start cost.
 
-For periodic designs of the nine-variable design problem (``optim.design.design_problem``):
+For periodic designs of the nine-variable design problem (``optim.presets.design_problem``):
 the implicit-function-theorem gradient of Eq. 19 over one period of the orbit
 (:func:`jaxcrank.numerics.steady.steady_value_and_grad`, in unit-box variables) against
 central differences of three references, none of which uses the gradient code:
@@ -34,8 +34,7 @@ from _common import machine
 
 import jaxcrank as jc
 from jaxcrank.numerics.steady import carry_state, steady_value_and_grad
-from optim.design import design_problem
-from optim.presets import ADAM_RUNS_SI
+from optim.presets import ADAM_RUNS_SI, design_problem
 
 KEY = "rms_transmission_angle_error_deg"
 ROOT = Path(__file__).resolve().parent

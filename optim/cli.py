@@ -54,17 +54,23 @@ from jaxcrank import cache
 from jaxcrank import config as mech_config
 from jaxcrank.physics.params import ParameterError
 
+from .design import TERMS
+from .objective import EQ19
 from .objective_config import objective_config, objective_from_config
 from .optimize import STEADY_LEARNING_RATE, Settings, default_settings, optimize
 from .optimizers import OPTIMIZERS, from_settings
-from .presets import PROBLEMS, paper_reference
+from .presets import PROBLEMS, design_problem, paper_reference
+from .presets import problem as preset_problem
 from .problem import AbstractProblem as Problem
+from .spec import derived_from_table, derived_table
 from .starts import multistart, periodic_start
 from .steady import Steady
 
 #: the default ``[optimizer]`` settings with the steady-state objective (those of
 #: [`optim.optimize.default_settings`][], with the regime guard)
 STEADY_OPTIMIZER = {"method": "adam", "learning_rate": STEADY_LEARNING_RATE}
+#: the ``[design]`` keys that change a problem's derived group
+GROUP_KEYS = ("stroke", "stroke_tolerance", "min_transmission_deg", "scale_links")
 GRID_CHUNK = 21  # designs per vmap batch of the landscape (and of the final design's re-evaluation)
 
 
@@ -176,6 +182,14 @@ def _fields(cls, section, values):
 
 
 def build(cfg) -> tuple[Problem, Settings]:
+    """The problem and optimiser settings of an optimiser config (docs/optimiser-config.md): the
+    preset ``problem`` ([`optim.presets`][]) changed by ``[objective]``, ``[design]`` (fields of
+    [`optim.design.DesignProblem`][]; ``stroke``, ``stroke_tolerance``, ``min_transmission_deg``
+    and ``scale_links`` change its derived group, ``weights`` the design preset's terms besides
+    Eq. 19, ``variables`` a subset of the design preset's) and ``[mechanism]``.
+
+    Raises:
+        ParameterError: an unknown problem, key or value."""
     name = cfg.get("problem", "paper")
     if name not in PROBLEMS:
         raise ParameterError(
@@ -183,22 +197,34 @@ def build(cfg) -> tuple[Problem, Settings]:
         )
     section = cfg.get("objective", {})
     design = dict(cfg.get("design", {}))
-    kwargs = {"objective": objective_from_config(section)} if section else {}
+    objective = objective_from_config(section) if section else None
     if "variables" in design:  # a subset of the design problem's variables, at their default bounds
         if name != "design":
             raise ParameterError(f"[design] variables: only the design problem takes it, not {name!r}")
-        kwargs["variables"] = tuple(design.pop("variables"))
-    problem = PROBLEMS[name](**kwargs)
+        problem = design_problem(objective, variables=tuple(design.pop("variables")))
+    else:
+        problem = preset_problem(name)
+        problem = problem if objective is None else problem.with_objective(objective)
     changes = {"base": mech_config.from_dict(cfg["mechanism"])} if "mechanism" in cfg else {}
+    group = {k: design.pop(k) for k in GROUP_KEYS if k in design}
+    if "derived" in design:
+        table = design.pop("derived")
+        changes["derived"] = None if table is None else derived_from_table(table)
+    if group:
+        if problem.derived is None:
+            raise ParameterError(f"[design] {sorted(group)}: problem {name!r} has no derived group")
+        changes["derived"] = dataclasses.replace(changes.get("derived", problem.derived), **group)
+    if "weights" in design:
+        weights = dict(design.pop("weights"))
+        bad = [k for k in weights if k not in TERMS or k == EQ19]
+        if bad:
+            raise ParameterError(f"[design] weights of {bad}: valid terms are {list(TERMS)[1:]}")
+        changes["terms"] = ((EQ19, 1.0),) + tuple((k, float(weights[k])) for k in TERMS if weights.get(k, 0.0))
     if design:
         design = _fields(type(problem), "design", design)
         design = {
             k: (
-                tuple(tuple(r) for r in v)
-                if k in ("A", "scatter", "weights")
-                else tuple(v)
-                if isinstance(v, list)
-                else v
+                tuple(tuple(r) for r in v) if k in ("A", "scatter", "terms") else tuple(v) if isinstance(v, list) else v
             )
             for k, v in design.items()
         }
@@ -260,12 +286,20 @@ def resolved(problem: Problem, settings: Settings, name: str) -> dict:
 
 
 def _subclass_fields(problem: Problem) -> dict:
-    """The fields a problem class adds to [`AbstractProblem`][optim.problem.AbstractProblem]."""
+    """The fields a problem class adds to [`AbstractProblem`][optim.problem.AbstractProblem], as TOML
+    values (the derived group as its table; empty limits and lengths left out)."""
     extra = [f.name for f in dataclasses.fields(problem) if f.name not in {g.name for g in dataclasses.fields(Problem)}]
-    return {
-        k: ([list(e) for e in getattr(problem, k)] if k in ("weights", "scatter") else getattr(problem, k))
-        for k in extra
-    }
+    out = {}
+    for k in extra:
+        v = getattr(problem, k)
+        if k in ("limits", "lengths"):
+            if v:
+                raise ParameterError(f"a problem with {k} is a problem file: run it with --problem FILE.toml")
+            continue
+        out[k] = derived_table(v) if k == "derived" and v is not None else v
+        if k in ("terms", "scatter"):
+            out[k] = [list(e) for e in v]
+    return out
 
 
 def _regime(problem: Problem, x) -> dict:
@@ -281,10 +315,17 @@ def _drop_none(d):
 
 
 def run(args) -> int:
-    from . import plots, search
-
     cfg = _settings(args)
     problem, settings = build(cfg)
+    return run_problem(args, problem, settings, cfg.get("problem", "paper"))
+
+
+def run_problem(args, problem: Problem, settings: Settings, name: str) -> int:
+    """Optimise ``problem`` with ``settings`` as ``jaxcrank optimize`` does (the command line
+    ``args``: out, resume, grid, cache, quiet, regime), writing the run folder; ``name`` is the
+    preset's (or the problem file's) name in optimize.toml and result.json."""
+    from . import plots, search
+
     if not args.no_cache:
         try:
             cache.enable(args.cache_dir)
@@ -312,9 +353,7 @@ def run(args) -> int:
             print(f"optimize: {problem.description}: classifying starts (compiling on a first run)", file=sys.stderr)
         found = periodic_start(problem, seed=settings.seed, progress=not args.quiet)
         problem = found.problem  # optimize.toml records the chosen start: --resume continues from it
-    (out / "optimize.toml").write_text(
-        tomli_w.dumps(_drop_none(resolved(problem, settings, cfg.get("problem", "paper"))))
-    )
+    (out / "optimize.toml").write_text(tomli_w.dumps(_drop_none(resolved(problem, settings, name))))
     if not args.quiet and found is None:  # the first evaluation compiles (and settles from rest)
         print(f"optimize: {problem.description}: evaluating the start (compiling on a first run)", file=sys.stderr)
     if settings.starts > 1:
@@ -373,7 +412,7 @@ def run(args) -> int:
         **({"start_runs": res["runs"], "best_start": res["best_start"]} if "runs" in res else {}),
         **({"grid": grid_info} if grid_info else {}),
         "final_regime": _regime(problem, res["final"]) if args.regime else None,
-        **({"paper": paper_reference()} if cfg.get("problem", "paper") in ("paper", "robust") else {}),
+        **({"paper": paper_reference()} if name in ("paper", "robust") else {}),
     }
     (out / "result.json").write_text(json.dumps(result, indent=2))
     print(

@@ -1,7 +1,7 @@
 """Constraints on any quantity, with their exact gradients: the augmented Lagrangian around the
 optimiser of [`optim.optimize`][], inside its regime guard.
 
-A [`FileProblem`][optim.spec.FileProblem] minimises ``f(x) = sum_i w_i q_i(x) + cost(x)`` subject
+A [`DesignProblem`][optim.design.DesignProblem] minimises ``f(x) = sum_i w_i q_i(x) + cost(x)`` subject
 to ``lower_j <= c_j(x) <= upper_j`` on quantities (metrics of the steady-state orbit, kinematics
 of the ideal mechanism) and to bounds and linear constraints (held exactly by the projection).
 Each bound on a quantity is a scaled inequality ``g(x) = (c(x) - upper) / s + margin <= 0`` (or
@@ -34,7 +34,7 @@ import numpy as np
 
 from jaxcrank.physics.params import ParameterError
 
-from .spec import FileProblem
+from .design import DesignProblem
 from .steady import _PROGRAMS, SteadyEvaluator, _key, _light, report
 
 #: the inequality's margin in units of the constraint's scale: limits are approached from inside
@@ -62,21 +62,21 @@ class Rounds:
             raise ParameterError(f"[optimizer] penalty = {self.penalty:g} must be > 0 and growth {self.growth:g} > 1")
 
 
-def scales(problem: FileProblem) -> np.ndarray:
+def scales(problem: DesignProblem) -> np.ndarray:
     """Each constraint's scale: given, or its largest |bound| (1 where both are 0)."""
     out = []
-    for _, lo, hi, s in problem.constraints:
+    for _, lo, hi, s in problem.limits:
         size = max(abs(v) for v in (lo, hi) if v is not None)
         out.append(s if s is not None else (size if size > 0 else 1.0))
     return np.asarray(out, dtype=float)
 
 
-def inequalities(problem: FileProblem, values) -> tuple[np.ndarray, np.ndarray]:
+def inequalities(problem: DesignProblem, values) -> tuple[np.ndarray, np.ndarray]:
     """The scaled inequalities ``g <= 0`` of the constraints' ``values`` (margin not included) and,
     per inequality, the index of its constraint and its sign (d g / d c = sign / scale)."""
     s = scales(problem)
     g, rows = [], []
-    for j, (_, lo, hi, _) in enumerate(problem.constraints):
+    for j, (_, lo, hi, _) in enumerate(problem.limits):
         if hi is not None:
             g.append((values[j] - hi) / s[j]), rows.append((j, 1.0 / s[j]))
         if lo is not None:
@@ -84,25 +84,25 @@ def inequalities(problem: FileProblem, values) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(g, dtype=float), np.asarray(rows, dtype=float).reshape(-1, 2)
 
 
-def satisfied(problem: FileProblem, values, tol: float = 0.0) -> list[bool]:
+def satisfied(problem: DesignProblem, values, tol: float = 0.0) -> list[bool]:
     """Whether each constraint holds at its ``values`` (within ``tol`` of its unit)."""
     out = []
-    for v, (_, lo, hi, _) in zip(values, problem.constraints):
+    for v, (_, lo, hi, _) in zip(values, problem.limits):
         out.append(bool(np.isfinite(v) and (lo is None or v >= lo - tol) and (hi is None or v <= hi + tol)))
     return out
 
 
 class QuantityEvaluator(SteadyEvaluator):
-    """The steady-state evaluator of a [`FileProblem`][optim.spec.FileProblem]: the problem's outputs
+    """The steady-state evaluator of a [`DesignProblem`][optim.design.DesignProblem]: the problem's outputs
     (terms, cost, constraints' quantities) and their Jacobian at concrete designs, and the
     augmented Lagrangian's value and gradient from them (`set_round`). Outputs are kept per
     design, so every iterate is reported with its constraint values
     ([`row`][optim.constrained.QuantityEvaluator.row])."""
 
-    def __init__(self, problem: FileProblem):
+    def __init__(self, problem: DesignProblem):
         super().__init__(problem)
         self.outputs = {}  # design key -> outputs vector (numpy)
-        self.lam = np.zeros(len(inequalities(problem, np.zeros(len(problem.constraints)))[0]))
+        self.lam = np.zeros(len(inequalities(problem, np.zeros(len(problem.limits)))[0]))
         self.mu, self.f_ref, self.offset = 10.0, None, 0.0
         self._plain = jax.jit(lambda x, metrics: self.problem.outputs(metrics, x))
         self._plain_jac = jax.jit(jax.jacfwd(lambda x, metrics: self.problem.outputs(metrics, x)))
@@ -212,11 +212,11 @@ class QuantityEvaluator(SteadyEvaluator):
         return {
             "f": self.objective_of(out),
             **{f"term:{q}": float(v) for (q, _), v in zip(self.problem.terms, terms)},
-            **{f"constraint:{c[0]}": float(v) for c, v in zip(self.problem.constraints, cons)},
+            **{f"constraint:{c[0]}": float(v) for c, v in zip(self.problem.limits, cons)},
         }
 
 
-def report_terms(problem: FileProblem, outputs) -> dict:
+def report_terms(problem: DesignProblem, outputs) -> dict:
     """``objectives`` and ``constraints`` of an outputs vector: each with ``quantity``, ``value``,
     ``lower``, ``upper`` and ``satisfied`` (objectives: ``weight``, no bounds); and ``f``."""
     terms, cost, cons = problem.split(outputs)
@@ -230,20 +230,20 @@ def report_terms(problem: FileProblem, outputs) -> dict:
         ],
         "constraints": [
             {"quantity": q, "value": float(v), "lower": lo, "upper": hi, "satisfied": s}
-            for (q, lo, hi, _), v, s in zip(problem.constraints, cons, ok)
+            for (q, lo, hi, _), v, s in zip(problem.limits, cons, ok)
         ],
     }
 
 
 def solve(
-    problem: FileProblem,
+    problem: DesignProblem,
     settings,
     rounds: Rounds = Rounds(),
     out: Path | None = None,
     resume: bool = False,
     progress: bool = True,
 ) -> dict:
-    """Minimise a [`FileProblem`][optim.spec.FileProblem] under its constraints (module docstring).
+    """Minimise a [`DesignProblem`][optim.design.DesignProblem] under its constraints (module docstring).
 
     Args:
         settings: the optimiser of each round ([`optim.optimize.Settings`][]; its
@@ -269,7 +269,7 @@ def solve(
     found = None
     if state is None:
         found = periodic_start(problem, seed=settings.seed, progress=progress, evaluator=ev)
-        x = np.asarray(found.problem.start, dtype=float)
+        x = np.asarray(found.problem.from_unit(found.problem.start_unit()), dtype=float)
         state = {
             "start": x.tolist(),
             "f_ref": ev.f_ref,
@@ -325,7 +325,7 @@ def solve(
         if out is not None:
             _save(out, state)
         x, mu = x_new, mu_next
-        if worst <= 0.0 and (moved < settings.xtol or not problem.constraints):
+        if worst <= 0.0 and (moved < settings.xtol or not problem.limits):
             break
     candidates = [np.asarray(state["start"])] + [np.asarray(r["design_SI"]) for r in state["rounds"]]
     candidates += [np.asarray([h[f"{n}_SI"] for n in problem.names]) for h in history]
@@ -347,7 +347,7 @@ def solve(
     }
 
 
-def _best(problem: FileProblem, ev: QuantityEvaluator, designs) -> np.ndarray:
+def _best(problem: DesignProblem, ev: QuantityEvaluator, designs) -> np.ndarray:
     """The design with the lowest objective among those that satisfy every constraint, else the
     one with the smallest largest violation."""
     scored = []

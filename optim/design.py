@@ -1,376 +1,313 @@
-"""Many-variable design problems with nonlinear constraints held at every iterate.
+"""The design problem: one type for every problem, preset or user's ([`DesignProblem`][optim.design.DesignProblem]).
 
-A [`DesignProblem`][optim.design.DesignProblem] is a problem ([`AbstractProblem`][optim.problem.AbstractProblem]) whose
-geometry is
-reparametrised so that the mechanism-design constraints become bounds of the
-design box, which the optimiser's projection (and any box-bounded baseline)
-already keeps:
+A problem is data: the base mechanism; the variables (any parameter by name, derived link
+lengths [`optim.geometry.Length`][], and at most one derived group such as the slider-crank's
+stroke-holding or the four-bar's crank-rocker reparametrisation, [`optim.geometry`][]); the
+objective, a weighted sum of quantities by their ``summary.json`` names ([`optim.quantities`][]),
+optionally a statistic over manufactured parts; bounds, linear constraints and bounds on
+quantities (held by [`optim.constrained`][]). The preset problems are problem files
+([`optim.presets`][]); a user's file is read by [`optim.spec`][].
 
-- **stroke** ``S = sqrt((L1 + L2)^2 - e^2) - sqrt((L2 - L1)^2 - e^2)`` of the ideal
-  mechanism (closed form, the slider's distance between the two dead centres)
-  held at ``stroke`` (m);
-- **minimum transmission angle** of the ideal mechanism,
-  ``alpha_min = arccos((L1 + |e|) / L2)`` (closed form: the crank angle where the
-  slider line is farthest from the crank pin), at least ``min_transmission_deg``;
-- **assemblability** ``L2 >= L1 + |e|`` (full crank rotation), implied by
-  ``alpha_min > 0``.
-
-The geometry's design variables are the rod length ``rod_length`` (L2, m) and the
-minimum transmission angle ``min_transmission_angle`` (rad). With
-``a = L1 + e = L2 cos(alpha_min)`` fixed, the stroke is strictly increasing in
-``d = L1 - e`` on ``(-a, a]``,
-``S(d) = sqrt((L2 + a)(L2 + d)) - sqrt((L2 - a)(L2 - d))``, from 0 to ``2 a``; so
-the crank length and offset ``L1 = (a + d) / 2``, ``e = (a - d) / 2 >= 0`` follow from
-a monotone 1-D solve (bisection to machine precision, then one Newton step whose
-derivative is the implicit function theorem's: first derivatives exact). Every
-design in the box has the target stroke exactly (to rounding), ``alpha_min`` in
-its bounds (lower bound >= 40 deg) and ``L2 - L1 - e = L2 (1 - cos alpha_min) > 0``,
-provided ``stroke <= 2 L2 cos(alpha_max)`` at the smallest L2 (checked).
-
-Inertia: ``rod_inertia_ratio`` (dimensionless) sets ``J2 = ratio * m2 * L2^2``, the rod's
-inertia about its centre of mass for its mass and length (a uniform bar is 1/12;
-a rod with heavy bearing bosses at both ends more, up to the dumbbell's 1/4).
-Bounding the ratio keeps J2 physically consistent with the rod's mass and length.
-
-Objective (degrees, the Eq. 19 unit): Eq. 19 plus weighted terms from the same
-simulation, ``sum_i w_i m_i + cost``, the metrics ``m_i`` in `TERMS` and
-the weights ``w_i`` in degrees per metric unit, plus the reciprocal clearance
-cost of [`cost`][optim.problem.AbstractProblem.cost]. All terms are RMS values over the evaluation window
-(time averages of squares), so the ensemble gradient applies to each (the windows'
-sums of squares come from [`optim.sensitivity.window_sums`][]).
+Value: ``sum_i w_i q_i + cost``, in the unit of the terms (degrees for the preset problems,
+whose first term is the paper's Eq. 19 with weight 1, and whose other weights are degrees per
+unit of their term); the cost is the reciprocal clearance cost of
+[`cost`][optim.problem.AbstractProblem.cost]. With ``samples > 0`` the value is a statistic over
+manufactured parts (the same draws at every design: common random numbers).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from collections.abc import Sequence
+import re
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from jaxcrank.physics.compiled import compile_model
-from jaxcrank.physics.parameters import get_parameter, set_parameters
+from jaxcrank.physics.parameters import get_parameter, parameter_value, set_parameters
 from jaxcrank.physics.params import ParameterError
-from jaxcrank.physics.presets import SliderCrank, paper
+from jaxcrank.physics.signals import rms_metrics
+from jaxcrank.runs.sampling import Tolerance, monte_carlo
 
-from .objective import EQ19, AbstractObjective, safe_sqrt
+from . import quantities as Q
+from .geometry import CrankRocker, Length, SliderCrankStroke
+from .objective import EQ19, safe_sqrt
 from .problem import AbstractProblem, known_parameter
 from .steady import Steady
 
-#: design variables that are not mechanism fields (name -> SI unit)
-DERIVED = {"min_transmission_angle": "rad", "rod_inertia_ratio": "1"}
+#: the composite term of the clearance joints' forces (a wear proxy), N
+CONTACT_FORCE = "rms_contact_force_N"
 
-#: objective terms (name -> meaning); units in the suffix
+#: the terms of the slider-crank design preset (name -> meaning); units in the suffix
 TERMS = {
-    "rms_transmission_angle_error_deg": "RMS of actual - ideal transmission angle (paper Eq. 19), weight 1",
+    EQ19: "RMS of actual - ideal transmission angle (paper Eq. 19), weight 1",
     "rms_rod_x_deviation_m": "RMS of rod-centre x - ideal",
     "rms_slider_x_deviation_m": "RMS of slider x - ideal (the slider's positioning accuracy)",
     "rms_driving_moment_deviation_N_m": "RMS of driving moment - ideal driving moment (clearance-induced fluctuation)",
-    "rms_contact_force_N": "RMS normal contact force over the clearance joints (bearing wear proxy)",
+    CONTACT_FORCE: "RMS normal contact force over the clearance joints (bearing wear proxy)",
 }
 
-
-def ideal_stroke(l1, l2, e):
-    """Ideal slider stroke (distance between the dead centres), m:
-    ``sqrt((L1 + L2)^2 - e^2) - sqrt((L2 - L1)^2 - e^2)``. Needs ``L2 > L1 + |e|``."""
-    return jnp.sqrt((l2 + l1) ** 2 - e**2) - jnp.sqrt((l2 - l1) ** 2 - e**2)
-
-
-def min_transmission_angle(l1, l2, e):
-    """Ideal mechanism's minimum transmission angle, rad: ``arccos((L1 + |e|) / L2)``
-    (the transmission angle ``arccos((L1 sin theta1 - e) / L2)`` folded to (0, 90] deg,
-    smallest over a revolution). Needs ``L2 > L1 + |e|``."""
-    return jnp.arccos((l1 + jnp.abs(e)) / l2)
-
-
-def _stroke_in_d(l2, a, d):
-    return jnp.sqrt((l2 + a) * (l2 + d)) - jnp.sqrt((l2 - a) * (l2 - d))
-
-
-def _stroke_in_d_slope(l2, a, d):
-    return 0.5 * (jnp.sqrt((l2 + a) / (l2 + d)) + jnp.sqrt((l2 - a) / (l2 - d)))
-
-
-def geometry(l2, alpha, stroke, iterations: int = 64):
-    """Crank length L1 and offset e (m) with rod length ``l2`` (m), minimum
-    transmission angle ``alpha`` (rad, in (0, pi/2)) and ideal stroke ``stroke`` (m).
-
-    Solves ``S(d) = stroke`` for ``d = L1 - e`` on ``[-a, a]``, ``a = l2 cos(alpha)``
-    (S strictly increasing there) by bisection, then one Newton step through which
-    the derivative is the implicit function's: ``dd/dp = -(dS/dp) / (dS/dd)``.
-    Needs ``0 < stroke <= 2 a`` (the caller checks it on concrete bounds); traceable."""
-    l2, alpha, stroke = (jnp.asarray(v, dtype=float) for v in (l2, alpha, stroke))
-    a = l2 * jnp.cos(alpha)
-    sg = jax.lax.stop_gradient
-    l2c, ac, sc = sg(l2), sg(a), sg(stroke)
-
-    def bisect(_, bracket):
-        lo, hi = bracket
-        mid = 0.5 * (lo + hi)
-        high = _stroke_in_d(l2c, ac, mid) > sc
-        return jnp.where(high, lo, mid), jnp.where(high, mid, hi)
-
-    lo, hi = jax.lax.fori_loop(0, iterations, bisect, (-ac, ac))
-    d0 = 0.5 * (lo + hi)
-    d = d0 - (_stroke_in_d(l2, a, d0) - stroke) / sg(_stroke_in_d_slope(l2c, ac, d0))
-    return 0.5 * (a + d), 0.5 * (a - d)
-
-
-def terms(rms: dict, joints: Sequence[str]) -> dict[str, Float[Array, ""]]:
-    """The `TERMS` (name -> value in the unit of its name) from the RMS metrics of
-    an objective ([`optim.objective.AbstractObjective.rms`][]), by name: the contact
-    force term is the RMS over the clearance ``joints`` (the paper's B and C),
-    ``sqrt(mean_j F_j^2)``."""
-    out = {k: rms[k] for k in TERMS if k != "rms_contact_force_N"}
-    out["rms_contact_force_N"] = safe_sqrt(sum(rms[f"rms_contact_force_{j}_N"] ** 2 for j in joints) / len(joints))
-    return out
+#: statistics over manufactured parts: ``mean``, ``std`` (standard deviation) or ``pNN`` (a percentile)
+STATISTICS = ("mean", "std", "p50", "p90", "p95", "p99")
 
 
 @dataclasses.dataclass(frozen=True)
 class DesignProblem(AbstractProblem):
-    """A problem over a reparametrised geometry with the stroke, transmission and
-    assembly constraints built into its box (module docstring).
+    """A design problem (module docstring).
 
     Attributes (besides [`AbstractProblem`][optim.problem.AbstractProblem]'s):
-        stroke: target ideal slider stroke, m (held exactly by the reparametrisation;
-            the tolerance band below is what the tests and reports check).
-        stroke_tolerance: allowed stroke error, m (0.1 mm).
-        min_transmission_deg: smallest allowed minimum transmission angle, deg.
-        weights: ``(term, weight)`` pairs for the `TERMS` besides Eq. 19 (which
-            has weight 1), weight in degrees per unit of the term.
+        terms: the objective, ``(quantity, weight)`` pairs (default: Eq. 19 alone).
+        limits: bounds on quantities, ``(quantity, lower, upper, scale)`` (None: no bound;
+            ``scale`` the size violations are measured by, None: the largest |bound|); the
+            steady-state objective only ([`optim.constrained.solve`][] holds them).
+        lengths: derived length variables ([`optim.geometry.Length`][]), named among ``names``.
+        derived: a derived group ([`optim.geometry.SliderCrankStroke`][],
+            [`optim.geometry.CrankRocker`][]) or None.
+        scatter: manufacturing scatter, ``(name, tolerance, distribution)`` per parameter: the
+            part's value is the design's (or base's) plus a deviation within ``+-tolerance``
+            (SI), ``"uniform"`` or ``"normal"`` (the band as +-3 sigma).
+        samples: manufactured parts the value is a statistic over (0: the design alone).
+        seed: seed of the parts' draws.
+        statistic: the statistic over parts, one of `STATISTICS`.
+        kinematic_samples: driver angles per revolution of the kinematic quantities.
 
-    Variable names: ``rod_length`` and ``min_transmission_angle`` (both required),
-    ``rod_inertia_ratio`` (optional, then ``rod_inertia`` is derived), and any other
-    name [`jaxcrank.physics.parameters.set_parameter`][] accepts except ``crank_length``,
-    ``offset``, ``rod_inertia`` and ``driver.*`` (derived or fixing the sample grid).
-    The base must be a [`jaxcrank.SliderCrank`][jaxcrank.physics.presets.SliderCrank].
-
-    In [`optim.optimize.optimize`][]'s history, ``objective_without_cost_deg`` is the
-    objective minus the cost term: the weighted sum of all `TERMS`, not Eq. 19 alone.
+    Raises:
+        ParameterError: on construction, naming the field: an unknown quantity or variable,
+            an empty objective, bounds in the wrong order, a bad derived variable, limits or
+            quantities the objective cannot measure, a bad scatter.
     """
 
-    stroke: float = 0.240
-    stroke_tolerance: float = 1e-4
-    min_transmission_deg: float = 40.0
-    weights: tuple[tuple[str, float], ...] = ()
+    terms: tuple[tuple[str, float], ...] = ((EQ19, 1.0),)
+    limits: tuple[tuple[str, float | None, float | None, float | None], ...] = ()
+    lengths: tuple[Length, ...] = ()
+    derived: SliderCrankStroke | CrankRocker | None = None
+    scatter: tuple[tuple[str, float, str], ...] = ()
+    samples: int = 0
+    seed: int = 0
+    statistic: str = "mean"
+    kinematic_samples: int = 720
 
+    # ------------------------------------------------------------------ checks
     def check_variable(self, name: str) -> None:
-        if name in ("crank_length", "offset") or name.startswith("driver."):
-            raise ParameterError(
-                f"{name!r} cannot be a DesignProblem variable: crank_length and offset "
-                "follow from the stroke (the geometry's variables are rod_length and min_transmission_angle), "
-                "the driver fixes the objective's sample grid"
-            )
-        if name not in DERIVED:
+        if self.derived is not None:
+            self.derived.check_variable(name)
+            if name in self.derived.OWNED:
+                return
+        if name not in {v.name for v in self.lengths}:
             known_parameter(self.base, name)
 
     def check(self) -> None:
-        if not isinstance(self.base, SliderCrank):
-            raise ParameterError(
-                f"a DesignProblem's base must be a slider-crank (jaxcrank.SliderCrank), not {type(self.base).__name__}"
-            )
-        for req in ("rod_length", "min_transmission_angle"):
-            if req not in self.names:
+        for v in self.lengths:
+            v.check(self.base)
+            if v.name not in self.names:
+                raise ParameterError(f"length variable {v.name!r} is not among the variables {list(self.names)}")
+        if self.derived is not None:
+            self.derived.check(self)
+        if not self.terms:
+            raise ParameterError("the objective needs at least one term: terms = [{quantity = ..., weight = ...}]")
+        steady = isinstance(self.objective, Steady)
+        measurable = set(rms_metrics(self.base)) | {CONTACT_FORCE}
+        for q, w in self.terms:
+            if q != CONTACT_FORCE:
+                Q.check_quantity(self.base, q, "objective term")
+            if not steady and q not in measurable:
                 raise ParameterError(
-                    f"a DesignProblem needs the variable {req!r} (its geometry is "
-                    "parametrised by rod_length and min_transmission_angle)"
+                    f"objective term {q!r}: a windowed objective measures the RMS metrics only "
+                    f"({', '.join(sorted(measurable))}); use the steady state (method = 'steady_state')"
                 )
-        if "rod_inertia" in self.names and "rod_inertia_ratio" in self.names:
-            raise ParameterError("give rod_inertia or rod_inertia_ratio, not both")
-        if not self.stroke > 0:
-            raise ParameterError(f"stroke = {self.stroke:g} m must be > 0")
-        if not 0 < self.min_transmission_deg < 90:
-            raise ParameterError(f"min_transmission_deg = {self.min_transmission_deg:g} must be in (0, 90) deg")
-        i_a, i_l = self.names.index("min_transmission_angle"), self.names.index("rod_length")
-        lo_a, hi_a = self.lower[i_a], self.upper[i_a]
-        if lo_a < math.radians(self.min_transmission_deg) - 1e-12 or hi_a >= math.pi / 2:
-            raise ParameterError(
-                f"bounds of min_transmission_angle = [{lo_a:g}, {hi_a:g}] rad must lie in "
-                f"[{math.radians(self.min_transmission_deg):g}, {math.pi / 2:g}) rad "
-                f"(min_transmission_deg = {self.min_transmission_deg:g})"
-            )
-        reach = 2.0 * self.lower[i_l] * math.cos(hi_a)
-        if self.stroke > reach:
-            raise ParameterError(
-                f"stroke = {self.stroke:g} m is out of reach at the box corner rod_length = {self.lower[i_l]:g} m, "
-                f"min_transmission_angle = {hi_a:g} rad (largest stroke 2 L2 cos(alpha) = {reach:g} m); "
-                "valid: raise the lower rod_length or lower the upper min_transmission_angle"
-            )
-        for entry in self.weights:
-            if len(entry) != 2 or entry[0] not in TERMS or entry[0] == EQ19:
-                raise ParameterError(
-                    f"weights entry {entry!r} must be (term, weight) with term one of {list(TERMS)[1:]}"
-                )
-            if not entry[1] >= 0:
-                raise ParameterError(f"weight of {entry[0]} = {entry[1]:g} must be >= 0")
-        if len({e[0] for e in self.weights}) != len(self.weights):
-            raise ParameterError("weights names a term twice")
+            if not np.isfinite(w) or w == 0.0:
+                raise ParameterError(f"objective term {q!r}: weight = {w!r} must be a finite nonzero number")
+        if len({q for q, _ in self.terms}) != len(self.terms):
+            raise ParameterError("the objective names a term twice")
+        if self.limits and not steady:
+            raise ParameterError("bounds on quantities need the steady-state objective (method = 'steady_state')")
+        for q, lo, hi, scale in self.limits:
+            Q.check_quantity(self.base, q, "constraint")
+            if lo is None and hi is None:
+                raise ParameterError(f"constraint on {q!r}: give lower, upper or both")
+            if lo is not None and hi is not None and not lo < hi:
+                raise ParameterError(f"constraint on {q!r}: lower = {lo:g} must be below upper = {hi:g}")
+            if scale is not None and not scale > 0:
+                raise ParameterError(f"constraint on {q!r}: scale = {scale:g} must be > 0")
+        self._check_scatter()
 
+    def _check_scatter(self) -> None:
+        if self.samples < 0:
+            raise ParameterError(f"samples = {self.samples} must be >= 0 (0: no manufacturing scatter)")
+        if self.samples and not self.scatter:
+            raise ParameterError("samples > 0 needs a scatter: [(name, tolerance, distribution), ...]")
+        if self.samples and isinstance(self.objective, Steady):
+            raise ParameterError("the steady-state objective does not take manufactured parts (samples = 0)")
+        if self.statistic not in STATISTICS:
+            raise ParameterError(f"statistic = {self.statistic!r} is unknown; valid: {', '.join(STATISTICS)}")
+        for entry in self.scatter:
+            if len(entry) != 3:
+                raise ParameterError(f"scatter entry {entry!r} must be (name, tolerance, distribution)")
+            name, tol, _ = entry
+            known_parameter(self.base, name)
+            Tolerance(0.0, float(tol), entry[2])  # checks tolerance >= 0 and the distribution
+            if name.startswith("driver."):
+                raise ParameterError(
+                    f"scatter of {name} is not supported: the objective's sample grid (equal crank angles) "
+                    "needs one driver for all parts"
+                )
+        if len({e[0] for e in self.scatter}) != len(self.scatter):
+            raise ParameterError("scatter names a parameter twice")
+        if self.samples:
+            dev = self.draws()
+            for j, (name, tol, _) in enumerate(self.scatter):
+                if name.startswith("clearance_"):
+                    low = self.lower[self.names.index(name)] if name in self.names else get_parameter(self.base, name)
+                    if low + dev[:, j].min() <= 0.0:
+                        raise ParameterError(
+                            f"scatter of {name}: +-{tol:g} m reaches a clearance <= 0 ({low:g} m "
+                            f"{dev[:, j].min():+g} m in the draws); valid: tolerance below the smallest clearance"
+                        )
+
+    # ------------------------------------------------------------------ the design
     @property
     def description(self) -> str:
-        """``title``, or else the number of variables, the stroke and the transmission-angle floor."""
-        return self.title or (
-            f"design: {self.n} variables, stroke {self.stroke * 1e3:g} mm, "
-            f"transmission >= {self.min_transmission_deg:g} deg"
+        """``title`` (else the derived group's or the objective's description), naming the
+        manufactured parts when the value is a statistic over them."""
+        text = self.title or (
+            self.derived.describe(self)
+            if self.derived is not None
+            else "minimise " + " + ".join(f"{w:g} x {q}" for q, w in self.terms)
         )
+        if self.samples:
+            what = "mean" if self.statistic == "mean" else self.statistic
+            return f"{text} ({what} over {self.samples} manufactured parts)"
+        return text
 
-    # ------------------------------------------------------------------ model
-    def weight_of(self) -> dict[str, float]:
-        """Weight of each of the `TERMS`, degrees per unit of the term (Eq. 19: 1)."""
-        w = dict(self.weights)
-        return {t: 1.0 if t == EQ19 else float(w.get(t, 0.0)) for t in TERMS}
-
-    def _get(self, x, name, default):
-        return x[self.names.index(name)] if name in self.names else default
-
-    def physical(self, x):
-        """Mechanism parameter names and their values (SI, traceable) at design ``x``:
-        the direct variables, then crank_length, rod_length, offset and (with
-        ``rod_inertia_ratio``) rod_inertia."""
+    def physical(self, x) -> tuple[tuple[str, ...], Float[Array, " p"]]:
+        """Mechanism parameter names and their values (SI, traceable) at design ``x``: the
+        direct variables, then what the derived group and each length variable set."""
         x = jnp.asarray(x, dtype=float)
-        names = [nm for nm in self.names if nm not in DERIVED and nm != "rod_length"]
+        owned = set(self.derived.OWNED) if self.derived is not None else set()
+        derived = {v.name for v in self.lengths} | owned
+        names = [nm for nm in self.names if nm not in derived]
         values = [x[self.names.index(nm)] for nm in names]
-        l2 = x[self.names.index("rod_length")]
-        l1, e = geometry(l2, x[self.names.index("min_transmission_angle")], self.stroke)
-        names += ["crank_length", "rod_length", "offset"]
-        values += [l1, l2, e]
-        if "rod_inertia_ratio" in self.names:
-            m2 = self._get(x, "rod_mass", self.base.rod_mass)
-            names.append("rod_inertia")
-            values.append(x[self.names.index("rod_inertia_ratio")] * m2 * l2**2)
-        return tuple(names), jnp.stack(values)
+        if self.derived is not None:
+            more, vals = self.derived.physical(self, x)
+            names, values = names + more, values + vals
+        if self.lengths:
+            mech = set_parameters(self.base, names, values)
+            for v in self.lengths:
+                more, vals = v.apply(self.base, mech, x[self.names.index(v.name)])
+                mech = set_parameters(mech, more, vals)
+                names, values = names + more, values + list(vals)
+        return tuple(names), jnp.stack([jnp.asarray(v, dtype=float) for v in values])
 
     def mechanism(self, x):
         names, values = self.physical(x)
         return set_parameters(self.base, names, values)
 
     def default_start(self) -> list[float]:
-        return [
-            0.5 * (lo + hi) if nm in DERIVED else float(get_parameter(self.base, nm))
-            for nm, lo, hi in zip(self.names, self.lower, self.upper)
-        ]
+        lengths = {v.name: v.base_length(self.base) for v in self.lengths}
+        out = []
+        for nm, lo, hi in zip(self.names, self.lower, self.upper):
+            value = None
+            if self.derived is not None and nm in self.derived.OWNED:
+                value = self.derived.default_start(self, nm, lo, hi)
+            if value is None:
+                value = lengths[nm] if nm in lengths else float(get_parameter(self.base, nm))
+            out.append(value)
+        return out
 
     def constraints(self, x) -> dict:
-        """The nonlinear constraints at SI design(s) ``x`` (..., n), numpy: ``stroke_m``,
-        ``stroke_error_m`` (vs ``stroke``), ``min_transmission_angle_deg`` and
-        ``assembly_margin_m`` (``L2 - L1 - |e|``, > 0 when assemblable), each
-        computed in closed form from the derived L1, L2, e (``crank_length_m``,
-        ``rod_length_m``, ``offset_m``)."""
-        xs = jnp.atleast_2d(jnp.asarray(x, dtype=float))
-        i_l, i_a = self.names.index("rod_length"), self.names.index("min_transmission_angle")
-        l2 = xs[:, i_l]
-        l1, e = jax.vmap(lambda a, b: geometry(a, b, self.stroke))(l2, xs[:, i_a])
-        s = ideal_stroke(l1, l2, e)
-        out = {
-            "stroke_m": s,
-            "stroke_error_m": s - self.stroke,
-            "min_transmission_angle_deg": jnp.degrees(min_transmission_angle(l1, l2, e)),
-            "assembly_margin_m": l2 - l1 - jnp.abs(e),
-            "crank_length_m": l1,
-            "rod_length_m": l2,
-            "offset_m": e,
-        }
-        shape = np.shape(x)[:-1]
-        return {k: np.asarray(v).reshape(shape) for k, v in out.items()}
+        """The derived group's closed-form constraint values at SI design(s) ``x`` (..., n), numpy
+        ([`optim.geometry.SliderCrankStroke.constraints`][],
+        [`optim.geometry.CrankRocker.constraints`][]); empty without a group."""
+        return {} if self.derived is None else self.derived.constraints(self, x)
 
     def feasible(self, x, tol=1e-12):
-        """Bounds, linear constraints and the nonlinear constraints (stroke within
-        ``stroke_tolerance``, minimum transmission angle, assemblability)."""
+        """Bounds, linear constraints and the derived group's constraints (the bounds on
+        quantities are the evaluator's, [`optim.constrained`][])."""
         ok = self.box_feasible(x, tol)
-        c = self.constraints(x)
-        return (
-            ok
-            & (np.abs(c["stroke_error_m"]) <= self.stroke_tolerance)
-            & (c["min_transmission_angle_deg"] >= self.min_transmission_deg - 1e-9)
-            & (c["assembly_margin_m"] > 0)
-        )
+        return ok if self.derived is None else ok & self.derived.feasible(self, x, self.constraints(x))
 
-    # ------------------------------------------------------------------ objective
-    def terms(self, x) -> dict[str, Float[Array, ""]]:
-        """`TERMS` at SI design ``x`` by the problem's objective (name -> value)."""
-        return terms(self.objective.rms(self.mechanism(x)), self.clearance_joints)
-
+    # ------------------------------------------------------------------ the value
     @property
     def clearance_joints(self) -> tuple[str, ...]:
-        """The base mechanism's clearance joints (the tree's cut joints), whose RMS contact
-        forces make the ``rms_contact_force_N`` term."""
+        """The base's clearance joints, over which ``rms_contact_force_N`` is taken."""
         return compile_model(self.base).tree.cut
 
+    def quantity(self, metrics: dict, name: str):
+        """A term's value from a metrics dict: the metric, or the composite
+        ``rms_contact_force_N = sqrt(mean_j rms_contact_force_<j>_N^2)`` over the clearance joints."""
+        if name == CONTACT_FORCE:
+            joints = self.clearance_joints
+            return safe_sqrt(sum(metrics[f"rms_contact_force_{j}_N"] ** 2 for j in joints) / len(joints))
+        return metrics[name]
+
     def loss(self, rms: dict) -> Float[Array, ""]:
-        w = self.weight_of()
-        t = terms(rms, self.clearance_joints)
-        return sum(w[k] * t[k] for k in TERMS)
+        return sum(w * self.quantity(rms, q) for q, w in self.terms)
 
-    def objective_value(self, x):
-        return self.loss(self.objective.rms(self.mechanism(x))) + self.cost(x)
+    def weight_of(self) -> dict[str, float]:
+        """Each term's weight, per unit of the term: the problem's terms, and 0 for the other
+        terms of the design preset (`TERMS`)."""
+        return {**dict.fromkeys(TERMS, 0.0), **dict(self.terms)}
+
+    def term_values(self, x) -> dict[str, Float[Array, ""]]:
+        """Every term of the design preset (`TERMS`) and the problem's own terms at SI design
+        ``x`` by the problem's objective (name -> value; a concrete ``x`` for the steady state)."""
+        rms = self.objective.rms(self.mechanism(x))
+        names = dict.fromkeys([k for k in TERMS if k == CONTACT_FORCE or k in rms] + [q for q, _ in self.terms])
+        return {k: self.quantity(rms, k) for k in names}
+
+    def draws(self) -> Float[np.ndarray, "samples scatter"]:
+        """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI."""
+        if not self.scatter:
+            return np.zeros((self.samples, 0))
+        tolerances = {name: Tolerance(0.0, tol, dist) for name, tol, dist in self.scatter}
+        return monte_carlo(tolerances, self.samples, seed=self.seed)[1]
+
+    def part(self, x, deviation):
+        """The manufactured part of SI design ``x`` with ``deviation`` (one row of
+        [`draws`][optim.design.DesignProblem.draws]), traceable."""
+        mech = self.mechanism(x)
+        names = [nm for nm, _, _ in self.scatter]
+        return set_parameters(mech, names, [parameter_value(mech, nm) + deviation[j] for j, nm in enumerate(names)])
+
+    def objective_value(self, x) -> Float[Array, ""]:
+        """The value at SI design ``x`` (module docstring; traceable for the windowed objectives,
+        a concrete ``x`` for the steady state; the bounds on quantities not included)."""
+        if not self.samples:
+            return self.loss(self.objective.rms(self.mechanism(x))) + self.cost(x)
+        parts = jax.vmap(lambda d: self.loss(self.objective.rms(self.part(x, d))))(jnp.asarray(self.draws()))
+        return statistic_of(parts, self.statistic) + self.cost(x)
+
+    # ------------------------------------------------------------------ outputs for the constrained solve
+    @property
+    def quantities(self) -> tuple[str, ...]:
+        """The quantities the problem reads: the terms', then the limits' (in order)."""
+        return tuple(q for q, _ in self.terms) + tuple(c[0] for c in self.limits)
+
+    def outputs(self, metrics: dict, x: Float[ArrayLike, " n"]) -> Float[Array, " k"]:
+        """The terms' quantities, the cost, then the limits' quantities at SI design ``x`` given
+        the headline ``metrics`` of its steady state (traceable)."""
+        kin = Q.kinematic_values(
+            self.mechanism(x), sorted({q for q in self.quantities if q in Q.KINEMATICS}), self.kinematic_samples
+        )
+        pick = lambda q: kin[q] if q in kin else jnp.asarray(self.quantity(metrics, q), dtype=float)
+        terms = [pick(q) for q, _ in self.terms]
+        return jnp.stack(terms + [self.cost(jnp.asarray(x, dtype=float))] + [pick(c[0]) for c in self.limits])
+
+    def split(self, outputs) -> tuple[np.ndarray, float, np.ndarray]:
+        """(terms' values, cost, limits' values) of an ``outputs`` vector (numpy)."""
+        v = np.asarray(outputs, dtype=float)
+        n = len(self.terms)
+        return v[:n], float(v[n]), v[n + 1 :]
 
 
-#: the design preset's variables: (name, lower, upper, start), SI
-DESIGN_VARIABLES = (
-    ("rod_length", 0.360, 0.440, 0.400),
-    ("min_transmission_angle", math.radians(40.0), math.radians(70.0), math.radians(60.0)),
-    ("clearance_B", 1e-4, 5e-4, 4e-4),
-    ("clearance_C", 1e-4, 5e-4, 4e-4),
-    ("rod_mass", 1.0, 2.5, 1.5473),
-    ("rod_inertia_ratio", 0.05, 0.125, 1.0 / 12.0),
-    ("slider_mass", 1.0, 2.5, 1.7964),
-    ("friction.coefficient", 0.02, 0.15, 0.1),
-    ("hole_material.youngs_modulus", 100e9, 210e9, 207e9),
-)
-
-#: the design preset's term weights, degrees per unit of each term
-DESIGN_WEIGHTS = (
-    ("rms_slider_x_deviation_m", 10.0),
-    ("rms_driving_moment_deviation_N_m", 2e-3),
-    ("rms_contact_force_N", 2e-5),
-)
-
-
-def design_problem(
-    objective: AbstractObjective | None = None,
-    cost_weight: float = 0.005,
-    start: Sequence[float] | None = None,
-    variables: Sequence[str] | None = None,
-    weights=DESIGN_WEIGHTS,
-) -> DesignProblem:
-    """A mechanism designer's problem with nine variables (`DESIGN_VARIABLES`):
-    rod length 360-440 mm and minimum transmission angle 40-70 deg (crank length
-    and offset follow from the 240 mm stroke), radial clearances at B and C
-    0.1-0.5 mm (with the reciprocal manufacturing cost, reference 0.5 mm), rod
-    mass 1-2.5 kg, rod inertia ratio ``J2 / (m2 L2^2)`` 0.05-0.125 (a uniform bar
-    is 1/12), slider mass 1-2.5 kg, the bearings' friction coefficient 0.02-0.15
-    (lubricated to dry steel) and the rod bearings' Young's modulus 100-210 GPa
-    (bronze to steel bushings; ``hole_material.youngs_modulus``, the rod being the hole at
-    both clearance joints). Minimises Eq. 19 + `DESIGN_WEIGHTS` terms +
-    cost. ``objective``: default the steady state ([`optim.steady.Steady`][], the
-    terms over one period of the periodic orbit). ``variables``: a subset of the names
-    (the others stay at their start values, folded into the base mechanism)."""
-    unknown = set(variables or ()) - {v[0] for v in DESIGN_VARIABLES}
-    if unknown:
-        raise ParameterError(f"unknown design variables {sorted(unknown)}; valid: {[v[0] for v in DESIGN_VARIABLES]}")
-    chosen = [v for v in DESIGN_VARIABLES if variables is None or v[0] in variables]
-    base = paper()
-    fixed = [v for v in DESIGN_VARIABLES if v not in chosen]
-    direct = [(nm, x0) for nm, _, _, x0 in fixed if nm not in DERIVED]
-    if direct:
-        base = set_parameters(base, [d[0] for d in direct], [d[1] for d in direct])
-    if "rod_inertia_ratio" not in [v[0] for v in chosen]:
-        ratio = next(v[3] for v in DESIGN_VARIABLES if v[0] == "rod_inertia_ratio")
-        l2 = next(v[3] for v in DESIGN_VARIABLES if v[0] == "rod_length")
-        base = set_parameters(base, ["rod_inertia"], [ratio * float(base.rod_mass) * l2**2])
-    has_clearance = any(v[0].startswith("clearance_") for v in chosen)
-    return DesignProblem(
-        base=base,
-        names=tuple(v[0] for v in chosen),
-        lower=tuple(v[1] for v in chosen),
-        upper=tuple(v[2] for v in chosen),
-        start=tuple(v[3] for v in chosen) if start is None else tuple(start),
-        objective=Steady() if objective is None else objective,
-        cost_weight=cost_weight if has_clearance else 0.0,
-        cost_reference=5e-4,
-        stroke=0.240,
-        weights=tuple(weights),
-    )
+def statistic_of(values: Float[ArrayLike, " parts"], statistic: str) -> Float[Array, ""]:
+    """The statistic (`STATISTICS`) of the parts' values, traceable: the mean, the standard deviation
+    (population, finite gradient at zero spread) or the percentile ``pNN`` (linear interpolation)."""
+    values = jnp.asarray(values)
+    if statistic == "mean":
+        return jnp.mean(values)
+    if statistic == "std":
+        return safe_sqrt(jnp.mean((values - jnp.mean(values)) ** 2))
+    return jnp.percentile(values, float(re.sub("^p", "", statistic)))

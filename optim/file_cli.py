@@ -39,7 +39,8 @@ from jaxcrank import cache  # noqa: E402
 from jaxcrank.physics.params import ParameterError  # noqa: E402
 
 from . import constrained, spec  # noqa: E402
-from .cli import STEADY_OPTIMIZER, _final_mechanism, settings_from_config  # noqa: E402
+from .cli import STEADY_OPTIMIZER, _final_mechanism, run_problem, settings_from_config  # noqa: E402
+from .steady import RegimeGuard, Steady  # noqa: E402
 
 #: the ``[optimizer]`` keys of the augmented Lagrangian (the others are the optimiser's)
 ROUND_KEYS = ("rounds", "penalty", "growth")
@@ -48,8 +49,6 @@ ROUND_KEYS = ("rounds", "penalty", "growth")
 def settings(table: dict):
     """The optimiser settings and the rounds of an ``[optimizer]`` table: the steady-state
     default (Adam with the regime guard) changed by its keys."""
-    from .steady import RegimeGuard
-
     values = dict(table)
     rounds = constrained.Rounds(**{k: values.pop(k) for k in ROUND_KEYS if k in values})
     values = values if "method" in values else {**STEADY_OPTIMIZER, **values}
@@ -69,6 +68,11 @@ def run(args) -> int:
         table["method"] = args.method
     if args.iterations is not None:
         table["max_iterations"] = args.iterations
+    if not isinstance(problem.objective, Steady):  # a windowed objective bounds no quantity: the plain run
+        unknown = set(table) & set(ROUND_KEYS)
+        if unknown:
+            raise ParameterError(f"[optimizer] {sorted(unknown)}: a windowed objective takes no rounds")
+        return run_problem(args, problem, settings_from_config(table), path.stem)
     opt, rounds = settings(table)
     out = args.out
     mech_config.check_resume(out, args.resume)
@@ -130,14 +134,14 @@ def write_history(path: Path, history: list[dict]) -> None:
 def plot_history(problem, history: list[dict], png: Path) -> None:
     """The objective and every constrained quantity per iterate, the rounds' starts marked and
     each constraint's feasible band shaded; saved to ``png``."""
-    panels = 1 + len(problem.constraints)
+    panels = 1 + len(problem.limits)
     fig, axes = plt.subplots(panels, 1, figsize=(6.5, 2.2 + 1.8 * panels), sharex=True, squeeze=False)
     axes = axes[:, 0]
     it = list(range(len(history)))
     axes[0].plot(it, [h.get("f", float("nan")) for h in history], "o-", ms=3)
     axes[0].set_ylabel("objective")
     axes[0].set_title(problem.description, fontsize=9)
-    for ax, (q, lo, hi, _) in zip(axes[1:], problem.constraints):
+    for ax, (q, lo, hi, _) in zip(axes[1:], problem.limits):
         ax.plot(it, [h.get(f"constraint:{q}", float("nan")) for h in history], "o-", ms=3, color="C1")
         ymin, ymax = ax.get_ylim()
         ax.axhspan(ymin if lo is None else lo, ymax if hi is None else hi, color="C2", alpha=0.15, label="allowed")

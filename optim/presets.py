@@ -1,64 +1,79 @@
-"""The problem presets by name, for the TOML/CLI boundary (``jaxcrank optimize --problem``,
-``python -m optim.scans``): name -> a function returning the problem, taking the
-objective instance as its ``objective`` keyword."""
+"""The preset problems: problem files in the package (``optim/problems/*.toml``, the format of
+[`optim.spec`][]), by name. The registry is the files: ``jaxcrank optimize --problem NAME`` and
+[`problem`][optim.presets.problem] read ``NAME.toml``. The functions below load a preset with the
+keyword changes the library's callers use (another objective, start, weights, variables).
+
+| name | the file |
+|---|---|
+| ``paper`` | the paper's Eq. 19 over L1 and L2 with ``L2 >= L1 + e``, the ensemble-gradient objective |
+| ``tolerance`` | the clearances at B and C, Eq. 19 plus the reciprocal clearance cost |
+| ``robust`` | the paper's problem, the mean of Eq. 19 over 8 manufactured parts |
+| ``design`` | nine variables on the slider-crank, the stroke held by its derived group, steady state |
+| ``four-bar`` | the four-bar's link lengths under Grashof's condition and the transmission bound |
+"""
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from importlib import resources
 
 from jaxcrank import reference
-from jaxcrank.physics.presets import paper
+from jaxcrank.physics.parameters import set_parameters
+from jaxcrank.physics.params import ParameterError
 
-from .design import design_problem
-from .ensemble import Ensemble
-from .four_bar import four_bar_problem
-from .objective import AbstractObjective
-from .problem import ParameterProblem
+from .design import TERMS, DesignProblem
+from .objective import EQ19, AbstractObjective
+from .spec import from_dict
 
 #: the paper's optimum of Eq. 19 (deg) and its reduction from the start design (%)
 PAPER_OPTIMUM_DEG = reference.value("optimisation", "optimum_deg")
 PAPER_REDUCTION_PCT = reference.value("optimisation", "reduction_percent")
 
+#: the preset problems: name -> the problem file in the package
+PROBLEMS = {name: f"{name}.toml" for name in ("paper", "tolerance", "robust", "design", "four-bar")}
 
-def paper_problem(objective: AbstractObjective = Ensemble(), start: Sequence[float] | None = None) -> ParameterProblem:
-    """The paper's problem (Eq. 19): L1 in [110, 130] mm, L2 in [390, 410] mm,
-    ``L2 >= L1 + e`` (written ``L1 - L2 <= -e``), offset e fixed at the preset's 50 mm.
-    Start: the box centre (L1 = 120, L2 = 400 mm); the paper's own design (L1 = 150
-    mm) lies outside its stated box."""
-    base = paper()
-    e = float(base.offset)
-    return ParameterProblem(
-        base=base,
-        names=("crank_length", "rod_length"),
-        lower=(0.110, 0.390),
-        upper=(0.130, 0.410),
-        A=((1.0, -1.0),),
-        b=(-e,),
-        start=(0.120, 0.400) if start is None else tuple(start),
-        objective=objective,
-        title="paper: RMS transmission-angle error over L1, L2",
-    )
+
+def problem(name: str) -> DesignProblem:
+    """The preset problem ``name`` (`PROBLEMS`), read from its file in the package.
+
+    Raises:
+        ParameterError: an unknown name (the message lists the presets)."""
+    import tomllib
+
+    if name not in PROBLEMS:
+        raise ParameterError(f"problem {name!r} is unknown; valid: {', '.join(PROBLEMS)}, or a problem file (.toml)")
+    text = resources.files("optim").joinpath("problems", PROBLEMS[name]).read_text()
+    return from_dict(tomllib.loads(text))[0]
+
+
+def problem_text(name: str) -> str:
+    """The problem file of the preset ``name``, as text."""
+    problem(name)  # checks the name
+    return resources.files("optim").joinpath("problems", PROBLEMS[name]).read_text()
+
+
+def _with(p: DesignProblem, objective=None, start=None, **changes) -> DesignProblem:
+    if objective is not None:
+        changes["objective"] = objective
+    if start is not None:
+        changes["start"] = tuple(start)
+    return dataclasses.replace(p, **changes) if changes else p
+
+
+def paper_problem(objective: AbstractObjective | None = None, start: Sequence[float] | None = None) -> DesignProblem:
+    """The ``paper`` preset: Eq. 19 over L1 in [110, 130] mm and L2 in [390, 410] mm with
+    ``L2 >= L1 + e`` (e the preset's 50 mm), from the box centre; ``objective`` default the
+    file's (the ensemble gradient over the paper's window)."""
+    return _with(problem("paper"), objective, start)
 
 
 def tolerance_problem(
-    objective: AbstractObjective = Ensemble(), cost_weight: float = 0.005, start: Sequence[float] | None = None
-) -> ParameterProblem:
-    """Tolerance allocation: radial clearances c_B, c_C in [0.1, 0.5] mm at the
-    paper's geometry, minimising RMS transmission-angle error + manufacturing cost
-    ([`AbstractProblem.cost`][optim.problem.AbstractProblem.cost], reference clearance 0.5 mm). Start: 0.4 mm at
-    both."""
-    return ParameterProblem(
-        base=paper(),
-        names=("clearance_B", "clearance_C"),
-        lower=(1e-4, 1e-4),
-        upper=(5e-4, 5e-4),
-        start=(4e-4, 4e-4) if start is None else tuple(start),
-        objective=objective,
-        cost_weight=cost_weight,
-        cost_reference=5e-4,
-        title="tolerance allocation: RMS error + reciprocal clearance cost",
-    )
+    objective: AbstractObjective | None = None, cost_weight: float = 0.005, start: Sequence[float] | None = None
+) -> DesignProblem:
+    """The ``tolerance`` preset: the clearances at B and C in [0.1, 0.5] mm, Eq. 19 + the
+    reciprocal clearance cost (``cost_weight``, deg; reference 0.5 mm), from 0.4 mm at both."""
+    return _with(problem("tolerance"), objective, start, cost_weight=cost_weight)
 
 
 #: the robust problem's default manufacturing scatter: lengths +-0.05 mm (normal, +-3 sigma),
@@ -72,24 +87,94 @@ ROBUST_SCATTER = (
 
 
 def robust_problem(
-    objective: AbstractObjective = Ensemble(), samples: int = 8, seed: int = 0, start: Sequence[float] | None = None
-) -> ParameterProblem:
-    """The paper's L1, L2 problem under manufacturing tolerances: minimise the
-    expected RMS transmission-angle error over ``samples`` parts drawn from
-    `ROBUST_SCATTER` (Monte Carlo mean, the same draws at every design)."""
-    p = paper_problem(objective, start)
-    return dataclasses.replace(
-        p, scatter=ROBUST_SCATTER, samples=samples, seed=seed, title="robust: expected RMS transmission-angle error"
+    objective: AbstractObjective | None = None, samples: int = 8, seed: int = 0, start: Sequence[float] | None = None
+) -> DesignProblem:
+    """The ``robust`` preset: the paper's problem, minimising the mean Eq. 19 over ``samples``
+    manufactured parts drawn from `ROBUST_SCATTER` (the same draws at every design)."""
+    return _with(problem("robust"), objective, start, samples=samples, seed=seed)
+
+
+def _variables(p: DesignProblem) -> tuple:
+    start = p.start if p.start is not None else p.default_start()
+    return tuple(zip(p.names, p.lower, p.upper, start))
+
+
+#: the design preset's term weights besides Eq. 19, degrees per unit of each term
+DESIGN_WEIGHTS = (
+    ("rms_slider_x_deviation_m", 10.0),
+    ("rms_driving_moment_deviation_N_m", 2e-3),
+    ("rms_contact_force_N", 2e-5),
+)
+
+
+def design_problem(
+    objective: AbstractObjective | None = None,
+    cost_weight: float = 0.005,
+    start: Sequence[float] | None = None,
+    variables: Sequence[str] | None = None,
+    weights=DESIGN_WEIGHTS,
+) -> DesignProblem:
+    """The ``design`` preset (nine variables, `design_variables`) with changes: ``objective``
+    (default the file's, the steady state), ``cost_weight`` (deg; 0 without a clearance variable),
+    ``start`` (SI, in the variables' order), ``variables`` (a subset of the names: the others stay
+    at their start values, folded into the base mechanism) and ``weights`` (``(term, weight)``
+    pairs of `optim.design.TERMS` besides Eq. 19, degrees per unit of the term)."""
+    p = problem("design")
+    every = _variables(p)
+    unknown = set(variables or ()) - set(p.names)
+    if unknown:
+        raise ParameterError(f"unknown design variables {sorted(unknown)}; valid: {list(p.names)}")
+    chosen = [v for v in every if variables is None or v[0] in variables]
+    fixed = [v for v in every if v not in chosen]
+    base = p.base
+    direct = [(nm, x0) for nm, _, _, x0 in fixed if nm not in ("min_transmission_angle", "rod_inertia_ratio")]
+    if direct:
+        base = set_parameters(base, [d[0] for d in direct], [d[1] for d in direct])
+    if "rod_inertia_ratio" not in [v[0] for v in chosen]:
+        ratio = next(v[3] for v in every if v[0] == "rod_inertia_ratio")
+        l2 = next(v[3] for v in every if v[0] == "rod_length")
+        base = set_parameters(base, ["rod_inertia"], [ratio * float(base.rod_mass) * l2**2])
+    weights = dict(weights)
+    bad = [k for k in weights if k not in TERMS or k == EQ19]
+    if bad:
+        raise ParameterError(f"weights of {bad}: valid terms are {list(TERMS)[1:]}")
+    terms = ((EQ19, 1.0),) + tuple((k, float(weights[k])) for k in TERMS if weights.get(k, 0.0))
+    has_clearance = any(v[0].startswith("clearance_") for v in chosen)
+    return _with(
+        p,
+        objective,
+        tuple(v[3] for v in chosen) if start is None else start,
+        base=base,
+        names=tuple(v[0] for v in chosen),
+        lower=tuple(v[1] for v in chosen),
+        upper=tuple(v[2] for v in chosen),
+        cost_weight=cost_weight if has_clearance else 0.0,
+        terms=terms,
     )
 
 
-PROBLEMS = {
-    "paper": paper_problem,
-    "tolerance": tolerance_problem,
-    "robust": robust_problem,
-    "design": design_problem,
-    "four-bar": four_bar_problem,
-}
+def design_variables() -> tuple:
+    """The design preset's variables: ``(name, lower, upper, start)``, SI."""
+    return _variables(problem("design"))
+
+
+def four_bar_problem(
+    objective: AbstractObjective | None = None,
+    start: Sequence[float] | None = None,
+    min_transmission_deg: float = 40.0,
+) -> DesignProblem:
+    """The ``four-bar`` preset (its link lengths under Grashof's condition and the transmission
+    bound, steady state settling 40 revolutions) with changes: ``objective``, ``start`` and the
+    transmission bound ``min_transmission_deg`` (deg; the title follows)."""
+    p = problem("four-bar")
+    changes = {}
+    if min_transmission_deg != p.derived.min_transmission_deg:
+        changes["derived"] = dataclasses.replace(p.derived, min_transmission_deg=min_transmission_deg)
+        changes["title"] = (
+            f"four-bar: RMS transmission-angle error over the link lengths, transmission in "
+            f"[{min_transmission_deg:g}, {180 - min_transmission_deg:g}] deg"
+        )
+    return _with(p, objective, start, **changes)
 
 
 #: Reference designs of the nine-variable design problem (``design_problem``), SI values in

@@ -3,11 +3,8 @@ constraints, and what is minimised.
 
 [`AbstractProblem`][optim.problem.AbstractProblem] holds what every problem shares (variables, bounds, linear
 constraints, the objective instance, the cost term, the scaling and the projection);
-its final subclasses say how a design becomes a mechanism and how the objective's
-metrics become the problem's value: [`ParameterProblem`][optim.problem.ParameterProblem] (mechanism parameters
-directly, Eq. 19, optionally averaged over manufactured parts) here, and
-[`optim.design.DesignProblem`][] (a reparametrised geometry with nonlinear
-constraints held by its box, weighted terms).
+its one final subclass, [`optim.design.DesignProblem`][], says how a design becomes a
+mechanism and how the objective's metrics become the problem's value.
 
 Variables are scaled to the unit box, ``u = (x - lower) / (upper - lower)``, so
 millimetres and metres (or clearances and lengths) weigh the same for the
@@ -29,12 +26,11 @@ import optax
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from jaxcrank.physics.linkage import AbstractMechanism as Mechanism
-from jaxcrank.physics.parameters import get_parameter, parameter_value, set_parameters
+from jaxcrank.physics.parameters import get_parameter
 from jaxcrank.physics.params import ParameterError
-from jaxcrank.runs.sampling import Tolerance, monte_carlo
 
 from .ensemble import Ensemble
-from .objective import EQ19, AbstractObjective, value_and_grad
+from .objective import AbstractObjective, value_and_grad
 
 
 @dataclasses.dataclass(frozen=True)
@@ -283,105 +279,3 @@ class FeasibleSet:
         eye = np.eye(self.n)
         g = np.concatenate([eye, -eye, np.asarray(self.A, dtype=float)])
         return g, np.concatenate([np.ones(self.n), np.zeros(self.n), np.asarray(self.b, dtype=float)])
-
-
-@dataclasses.dataclass(frozen=True)
-class ParameterProblem(AbstractProblem):
-    """Mechanism parameters as the variables (any name
-    [`jaxcrank.physics.parameters.set_parameter`][] accepts), Eq. 19 as the value, and
-    optionally the mean over manufactured parts (robust design).
-
-    Attributes (besides [`AbstractProblem`][optim.problem.AbstractProblem]'s):
-        scatter: manufacturing scatter for the robust objective, one
-            ``(name, tolerance, distribution)`` per parameter: the part's value is the
-            design's (or the base's) value plus a deviation within ``+-tolerance`` (SI),
-            ``"uniform"`` over the band or ``"normal"`` with the band as +-3 sigma
-            ([`jaxcrank.runs.sampling.Tolerance`][]).
-        samples: number of manufactured parts the robust objective averages over
-            (0: the nominal design alone). With ``samples > 0`` the Eq. 19 part of the
-            objective is the Monte Carlo mean over ``samples`` parts, the same draws at
-            every design (common random numbers, a sample-average approximation of the
-            expected RMS error), and its gradient the mean of the parts' gradients.
-        seed: seed of those draws.
-    """
-
-    scatter: tuple[tuple[str, float, str], ...] = ()
-    samples: int = 0
-    seed: int = 0
-
-    def check_variable(self, name: str) -> None:
-        known_parameter(self.base, name)
-
-    def check(self) -> None:
-        if self.samples < 0:
-            raise ParameterError(f"samples = {self.samples} must be >= 0 (0: no manufacturing scatter)")
-        if self.samples and not self.scatter:
-            raise ParameterError("samples > 0 needs a scatter: [(name, tolerance, distribution), ...]")
-        for entry in self.scatter:
-            if len(entry) != 3:
-                raise ParameterError(f"scatter entry {entry!r} must be (name, tolerance, distribution)")
-            name, tol, dist = entry
-            known_parameter(self.base, name)
-            Tolerance(0.0, float(tol), dist)  # checks tolerance >= 0 and the distribution
-            if name.startswith("driver."):
-                raise ParameterError(
-                    f"scatter of {name} is not supported: the objective's sample grid "
-                    "(equal crank angles) needs one driver for all parts"
-                )
-        if len({e[0] for e in self.scatter}) != len(self.scatter):
-            raise ParameterError("scatter names a parameter twice")
-        if self.samples:
-            dev = self.draws()
-            for j, (name, tol, _) in enumerate(self.scatter):
-                if name.startswith("clearance_"):
-                    lowest = (
-                        self.lower[self.names.index(name)]
-                        if name in self.names
-                        else float(get_parameter(self.base, name))
-                    )
-                    if lowest + dev[:, j].min() <= 0.0:
-                        raise ParameterError(
-                            f"scatter of {name}: +-{tol:g} m reaches a clearance <= 0 ({lowest:g} m "
-                            f"{dev[:, j].min():+g} m in the draws); valid: tolerance below the smallest clearance"
-                        )
-
-    @property
-    def description(self) -> str:
-        """``title`` for reports and plots, naming the number of manufactured parts
-        when the objective is a mean over them (``samples > 0``)."""
-        return f"{self.title} (mean over {self.samples} manufactured parts)" if self.samples else self.title
-
-    def feasible(self, x: Float[ArrayLike, "*designs n"], tol=1e-12) -> Bool[ArrayLike, "*designs"]:
-        """Whether the SI design ``x`` satisfies bounds and constraints (numpy bool, batched)."""
-        return self.box_feasible(x, tol)
-
-    def mechanism(self, x: Float[ArrayLike, " n"]) -> Mechanism:
-        return set_parameters(self.base, self.names, x)
-
-    def default_start(self) -> list[float]:
-        return [float(get_parameter(self.base, nm)) for nm in self.names]
-
-    def draws(self) -> Float[np.ndarray, "samples scatter"]:
-        """Deviations of the manufactured parts from the design, (samples, len(scatter)), SI:
-        the Monte Carlo draws of [`jaxcrank.runs.sampling.monte_carlo`][] about a zero nominal."""
-        if not self.scatter:
-            return np.zeros((self.samples, 0))
-        tolerances = {name: Tolerance(0.0, tol, dist) for name, tol, dist in self.scatter}
-        return monte_carlo(tolerances, self.samples, seed=self.seed)[1]
-
-    def part(self, x: Float[ArrayLike, " n"], deviation: Float[ArrayLike, " scatter"]) -> Mechanism:
-        """The manufactured part of SI design ``x`` with ``deviation`` (one row of
-        [`draws`][optim.problem.ParameterProblem.draws]): each scattered parameter at its design (or base) value plus
-        its deviation (traceable)."""
-        mech = self.mechanism(x)
-        names = [nm for nm, _, _ in self.scatter]
-        return set_parameters(mech, names, [parameter_value(mech, nm) + deviation[j] for j, nm in enumerate(names)])
-
-    def loss(self, rms: dict) -> Float[Array, ""]:
-        return rms[EQ19]
-
-    def objective_value(self, x: Float[ArrayLike, " n"]) -> Float[Array, ""]:
-        if not self.samples:
-            return self.loss(self.objective.rms(self.mechanism(x))) + self.cost(x)
-        parts = jax.vmap(lambda d: self.loss(self.objective.rms(self.part(x, d))))(jnp.asarray(self.draws()))
-        return jnp.mean(parts) + self.cost(x)

@@ -30,14 +30,14 @@ import numpy as np
 import pytest
 from optim.ensemble import Ensemble
 from optim.optimize import programs
-from optim.problem import ParameterProblem
+from optim.design import DesignProblem
 from optim.presets import paper_problem
 traced = []
-original = ParameterProblem.objective_value
+original = DesignProblem.objective_value
 def counting(self, *a, **k):
     traced.append(1)
     return original(self, *a, **k)
-ParameterProblem.objective_value = counting
+DesignProblem.objective_value = counting
 tsit5 = SolveOptions.from_text("tsit5", max_steps=5_000)
 prob = paper_problem(Ensemble(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_options=tsit5), start=None)
 vg, _ = programs(prob)

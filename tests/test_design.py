@@ -18,12 +18,17 @@ import tomli_w
 from jaxcrank import SolveOptions
 from jaxcrank.physics.params import ParameterError
 from optim import cli
-from optim.design import DESIGN_VARIABLES, TERMS, DesignProblem, design_problem, geometry, ideal_stroke
+from optim.design import TERMS, DesignProblem
 from optim.ensemble import Ensemble
-from optim.objective import AbstractObjective, Pathwise
+from optim.geometry import CrankRocker, SliderCrankStroke, ideal_stroke
+from optim.geometry import crank_and_offset as geometry
+from optim.objective import EQ19, AbstractObjective, Pathwise
 from optim.optimize import Settings, optimize
 from optim.optimizers import adam
+from optim.presets import design_problem, design_variables
 from optim.search import pathwise_of
+
+DESIGN_VARIABLES = design_variables()
 
 # A non-chaotic window for exact-gradient checks (as tests/test_objectives.py's EXACT):
 # the first 1.2 ms, tight tolerances, pathwise derivative.
@@ -55,7 +60,7 @@ def test_geometry_holds_the_stroke_transmission_and_assembly_over_the_box():
     th = jnp.linspace(0.0, 2 * math.pi, 20_001)
     slider = ideal.body_index(mech, "slider")
     x3 = jax.vmap(lambda t: ideal.positions(mech, t)[slider, 0])(th / float(mech.driver.speed))
-    assert float(jnp.max(x3) - jnp.min(x3)) == pytest.approx(prob.stroke, abs=1e-7)
+    assert float(jnp.max(x3) - jnp.min(x3)) == pytest.approx(prob.derived.stroke, abs=1e-7)
 
 
 def test_geometry_derivatives_are_the_implicit_functions():
@@ -109,7 +114,7 @@ def test_preset_has_nine_variables_within_physical_bounds():
 
 def test_preset_round_trips_through_the_config(tmp_path):
     prob, settings = cli.build({"problem": "design", "design": {"weights": [["rms_contact_force_N", 3e-5]]}})
-    assert isinstance(prob, DesignProblem) and dict(prob.weights) == {"rms_contact_force_N": 3e-5}
+    assert isinstance(prob, DesignProblem) and dict(prob.terms) == {EQ19: 1.0, "rms_contact_force_N": 3e-5}
     path = tmp_path / "optimize.toml"
     path.write_text(tomli_w.dumps(cli._drop_none(cli.resolved(prob, settings, "design"))))
     again, settings2 = cli.build(tomllib.loads(path.read_text()))
@@ -122,8 +127,8 @@ def test_preset_round_trips_through_the_config(tmp_path):
         (dict(lower=(0.30,) + tuple(v[1] for v in DESIGN_VARIABLES[1:])), "out of reach"),
         (dict(lower=(0.36, math.radians(35.0)) + tuple(v[1] for v in DESIGN_VARIABLES[2:])), "min_transmission_angle"),
         (dict(names=("crank_length",) + tuple(v[0] for v in DESIGN_VARIABLES[1:])), "rod_length"),
-        (dict(weights=(("peak_contact_force_N", 1.0),)), "weights"),
-        (dict(stroke=-0.1), "stroke"),
+        (dict(terms=((EQ19, 1.0), ("peak_contact_force_N", 1.0))), "unknown quantity"),
+        (dict(derived=SliderCrankStroke(stroke=-0.1)), "stroke"),
     ],
 )
 def test_bad_design_problems_raise(change, match):
@@ -149,7 +154,7 @@ def term_gradients(exact_problem):
 
     def all_terms(u):
         x = prob.from_unit(u)
-        t = prob.terms(x)
+        t = prob.term_values(x)
         return jnp.append(jnp.stack([t[k] for k in TERMS]), prob.cost(x))
 
     terms = jax.jit(all_terms)
@@ -332,11 +337,11 @@ def test_ensemble_terms_have_the_exact_values_and_finite_gradients():
     x = jnp.asarray(prob.from_unit(prob.start_unit()))
 
     def stacked(x):
-        t = prob.terms(x)
+        t = prob.term_values(x)
         return jnp.stack([t[k] for k in TERMS])
 
     vals = np.asarray(stacked(x))
-    exact = np.asarray(jnp.stack(list(prob.with_objective(pathwise_of(obj)).terms(x).values())))
+    exact = np.asarray(jnp.stack(list(prob.with_objective(pathwise_of(obj)).term_values(x).values())))
     np.testing.assert_allclose(vals, exact, rtol=1e-12)
     jac = np.asarray(jax.jacrev(stacked)(x))
     g = np.asarray(jax.grad(prob.objective_value)(x))
@@ -346,7 +351,7 @@ def test_ensemble_terms_have_the_exact_values_and_finite_gradients():
     np.testing.assert_allclose(g, expect, rtol=1e-10, atol=1e-14 * np.max(np.abs(expect)))
 
 
-# ---------------------------------------------------------------- the four-bar problem (optim/four_bar.py)
+# ---------------------------------------------------------------- the four-bar problem (optim/problems/four-bar.toml)
 
 
 def _four_bar_box_designs(prob, count=200):
@@ -363,7 +368,7 @@ def test_four_bar_geometry_holds_grashof_and_the_transmission_bound_over_the_box
     at the start; valid mechanisms (FourBar's own checks, through the config)."""
     from jaxcrank.physics.presets import grashof_crank_rocker
     from jaxcrank.runs import config
-    from optim.four_bar import four_bar_problem
+    from optim.presets import four_bar_problem
 
     prob = four_bar_problem()
     x = _four_bar_box_designs(prob)
@@ -393,7 +398,7 @@ def test_four_bar_transmission_extremes_are_the_ideal_mechanisms():
     them) has its smallest value at crank angle 0 and its largest at 180 deg, equal to the
     problem's variables within 1e-9 deg, at the preset and at two corners of the box."""
     from jaxcrank import ideal
-    from optim.four_bar import four_bar_problem
+    from optim.presets import four_bar_problem
 
     prob = four_bar_problem()
     for u in (prob.start_unit(), np.zeros(prob.n), np.ones(prob.n)):
@@ -413,11 +418,11 @@ def test_four_bar_transmission_extremes_are_the_ideal_mechanisms():
         (dict(upper=(0.45, 0.40, math.radians(110.0), math.radians(140.0))), "upper bound of the first"),
         (dict(names=("crank_length", "rocker_length", "min_transmission_angle", "max_transmission_angle")), "crank"),
         (dict(names=("coupler_length", "rocker_length", "min_transmission_angle", "coupler_mass")), "scale_links"),
-        (dict(min_transmission_deg=95.0), "min_transmission_deg"),
+        (dict(derived=CrankRocker(min_transmission_deg=95.0)), "min_transmission_deg"),
     ],
 )
 def test_bad_four_bar_problems_raise(change, match):
-    from optim.four_bar import four_bar_problem
+    from optim.presets import four_bar_problem
 
     with pytest.raises(ParameterError, match=match):
         dataclasses.replace(four_bar_problem(), **change)
@@ -425,12 +430,12 @@ def test_bad_four_bar_problems_raise(change, match):
 
 def test_four_bar_problem_needs_a_four_bar_and_round_trips_through_the_config():
     from jaxcrank import paper
-    from optim.four_bar import FourBarProblem, four_bar_problem
+    from optim.presets import four_bar_problem
 
     with pytest.raises(ParameterError, match="FourBar"):
         dataclasses.replace(four_bar_problem(), base=paper())
     prob, settings = cli.build({"problem": "four-bar", "design": {"min_transmission_deg": 35.0}})
-    assert isinstance(prob, FourBarProblem) and prob.min_transmission_deg == 35.0
+    assert isinstance(prob, DesignProblem) and prob.derived.min_transmission_deg == 35.0
     again, _ = cli.build(tomllib.loads(tomli_w.dumps(cli._drop_none(cli.resolved(prob, settings, "four-bar")))))
     assert again == prob and again.base == prob.base
 
@@ -463,8 +468,8 @@ def test_four_bar_feasibility_is_kept_at_every_iterate(method):
     """Large steps towards a minimum outside the box (the transmission angle pulled to 90 deg):
     every iterate is a crank-rocker with its transmission angle within [40, 140] deg, some
     iterate sits on a face of the box, and the objective falls."""
-    from optim.four_bar import four_bar_problem
     from optim.optimizers import from_settings
+    from optim.presets import four_bar_problem
 
     prob = four_bar_problem(_IdealTransmission())
     opt = adam(0.5) if method == "adam" else from_settings(method)
@@ -489,7 +494,7 @@ def test_four_bar_problem_takes_a_steady_state_step_from_the_cli(tmp_path):
 
     from jaxcrank.runs import config
     from jaxcrank.runs.cli import main
-    from optim.four_bar import four_bar_problem
+    from optim.presets import four_bar_problem
 
     out = tmp_path / "run"
     assert (
@@ -532,7 +537,7 @@ def test_the_four_bar_problem_optimises_a_lubricated_base_from_the_cli(tmp_path)
     from jaxcrank.physics import catalogue
     from jaxcrank.runs import config
     from jaxcrank.runs.cli import main
-    from optim.four_bar import four_bar_problem
+    from optim.presets import four_bar_problem
 
     cfg = tmp_path / "lubricated.toml"
     cfg.write_text(tomli_w.dumps({"problem": "four-bar", "mechanism": config.to_dict(catalogue.four_bar_lubricated())}))

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import jaxcrank as jc
 from jaxcrank import outputs
 from optim import ensemble as E, objective as O, sensitivity
-from optim.design import design_problem
+from optim.presets import design_problem
 from optim.presets import paper_problem
 
 out = {}

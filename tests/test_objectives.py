@@ -14,10 +14,10 @@ import pytest
 from jaxcrank import SolveOptions, paper
 from optim import ensemble as W
 from optim import search, sensitivity
+from optim.design import DesignProblem
 from optim.ensemble import Ensemble
 from optim.objective import EQ19, Pathwise, eq19, value_and_grad
 from optim.presets import paper_problem, tolerance_problem
-from optim.problem import ParameterProblem
 from tests.objectives import EXACT, SHORT, central_difference
 
 
@@ -79,7 +79,7 @@ ESTIMATOR_STEPS = (1e-6, 1e-6, 1e-8, 1e-8)  # m, central-difference steps (conve
 
 
 def _estimator_matches_central_differences(obj):
-    prob = ParameterProblem(paper(), ESTIMATOR_NAMES, (0.11, 0.39, 1e-4, 1e-4), (0.13, 0.41, 5e-4, 5e-4), objective=obj)
+    prob = DesignProblem(paper(), ESTIMATOR_NAMES, (0.11, 0.39, 1e-4, 1e-4), (0.13, 0.41, 5e-4, 5e-4), objective=obj)
     x = np.array([0.12, 0.40, 4e-4, 3e-4])
     _, starts = obj.reference(prob.mechanism(jnp.asarray(x)))
     f = jax.jit(lambda x: obj.pooled(prob.mechanism(x), starts)[EQ19])
@@ -201,7 +201,7 @@ def test_permuting_the_metric_definitions_changes_no_objective_value(monkeypatch
     metrics' order reversed, the design problem's value is the same, bit for bit."""
     from jaxcrank.physics import signals
     from optim import ensemble as E
-    from optim.design import design_problem
+    from optim.presets import design_problem
 
     prob = design_problem(
         Pathwise(t_start=0.0, t_end=1e-3, options=SolveOptions(rtol=1e-10, atol=1e-10, max_steps=100_000))
@@ -318,7 +318,7 @@ def test_steady_objective_gradient_matches_central_differences_of_its_values():
     import json
     from pathlib import Path
 
-    from optim.design import design_problem
+    from optim.presets import design_problem
     from optim.steady import Steady, SteadyEvaluator
 
     study = json.loads((Path(__file__).resolve().parents[1] / "bench/results/design_study.json").read_text())

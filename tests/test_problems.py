@@ -9,9 +9,9 @@ import pytest
 from jaxcrank import SolveOptions, paper
 from jaxcrank.physics.params import ParameterError
 from optim import search
+from optim.design import DesignProblem
 from optim.objective import Pathwise, eq19
 from optim.presets import paper_problem, robust_problem
-from optim.problem import ParameterProblem
 from tests.objectives import EXACT, central_difference
 
 
@@ -29,7 +29,7 @@ def test_projection_onto_the_box(u, expect):
 
 def test_projection_with_an_active_linear_constraint():
     # L2 >= L1 + 0.27 cuts the box's corner: (1, 0) scaled projects onto the line
-    prob = ParameterProblem(
+    prob = DesignProblem(
         paper(), ("crank_length", "rod_length"), (0.11, 0.39), (0.13, 0.41), A=((1.0, -1.0),), b=(-0.27,)
     )
     u = prob.project(jnp.array([1.0, 0.0]))
@@ -85,7 +85,7 @@ def test_bad_problems_raise(kwargs, match):
     from jaxcrank import ParameterError
 
     with pytest.raises(ParameterError, match=match):
-        ParameterProblem(base=paper(), **kwargs)
+        DesignProblem(base=paper(), **kwargs)
 
 
 @pytest.mark.slow  # eight parts, value and gradient against central differences (about 40 s)
@@ -153,7 +153,7 @@ def _implemented(cls):
     [
         (
             "optim.problem.AbstractProblem",
-            ("optim.problem.ParameterProblem", "optim.design.DesignProblem", "optim.four_bar.FourBarProblem"),
+            ("optim.design.DesignProblem",),
         ),
         ("optim.objective.AbstractObjective", ("optim.objective.Pathwise", "optim.ensemble.Ensemble")),
         ("optim.objective.AbstractObjective", ("optim.steady.Steady",)),
@@ -291,13 +291,13 @@ def test_the_design_config_chooses_a_subset_of_its_variables_by_name():
     (the others fixed at their start values); a resume reads the same problem back; a name it does
     not know, or another problem, is refused naming the key."""
     from optim.cli import build, resolved
-    from optim.design import design_problem
+    from optim.presets import design_problem
 
     chosen = ["rod_length", "min_transmission_angle", "clearance_C"]
     problem, settings = build({"problem": "design", "design": {"variables": chosen, "stroke": 0.22}})
     expect = design_problem(variables=chosen)
     assert problem.names == tuple(chosen) and problem.lower == expect.lower and problem.upper == expect.upper
-    assert problem.stroke == 0.22 and problem.description.startswith("design: 3 variables, stroke 220 mm")
+    assert problem.derived.stroke == 0.22 and problem.description.startswith("design: 3 variables, stroke 220 mm")
     again, _ = build(resolved(problem, settings, "design"))
     assert again.names == problem.names and again.start == problem.start and again.base == problem.base
     with pytest.raises(ParameterError, match=r"unknown design variables \['rod_lenght'\]; valid: \['rod_length'"):

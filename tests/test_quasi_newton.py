@@ -12,9 +12,10 @@ import pytest
 from jaxcrank import paper
 from jaxcrank.physics.params import ParameterError
 from optim import quasi_newton as qn
+from optim.design import DesignProblem
 from optim.optimize import Settings, optimize
 from optim.optimizers import ProjectedLBFGS, adam, from_settings
-from optim.problem import FeasibleSet, ParameterProblem
+from optim.problem import FeasibleSet
 from optim.steady import NOT_PERIODIC, PERIODIC, RegimeGuard, Steady
 
 
@@ -150,7 +151,7 @@ NAMES = ("crank_length", "rod_length", "rod_mass")
 def steady_problem():
     """Three mechanism parameters with a binding half-space ``L1 + L2 <= 0.525 m`` (scaled:
     ``u_0 + u_1 <= 1.25``), measured by a Steady objective (its evaluator replaced below)."""
-    return ParameterProblem(
+    return DesignProblem(
         base=paper(),
         names=NAMES,
         lower=(0.110, 0.390, 1.0),

@@ -41,7 +41,7 @@ kernel_only = pytest.mark.skipif(not regimes.resolve_engine(None) == "kernel", r
 
 
 def _design(x):
-    from optim.design import design_problem
+    from optim.presets import design_problem
 
     return design_problem().mechanism(jnp.asarray(x))
 

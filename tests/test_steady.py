@@ -25,7 +25,7 @@ KEY = "rms_transmission_angle_error_deg"
 
 
 def _design_problem():
-    from optim.design import design_problem
+    from optim.presets import design_problem
 
     return design_problem()
 

@@ -18,13 +18,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: the mechanism descriptions, where the slider-crank's names belong: the presets and the
 #: catalogue of named mechanisms; optim's named design problems on the paper's mechanism
-#: (optim/presets.py) and their description (optim/design.py). TOML and other data files
-#: are not Python and are not read.
+#: (optim/presets.py), their description (optim/design.py) and the slider-crank's derived
+#: geometry (optim/geometry.py). TOML and other data files are not Python and are not read.
 DESCRIPTIONS = {
     "jaxcrank/physics/presets.py",
     "jaxcrank/physics/catalogue.py",
     "optim/presets.py",
     "optim/design.py",
+    "optim/geometry.py",
 }
 #: rules that do not apply to a file, and why:
 #: - a prismatic joint's two sides are its guide and its slider (Prismatic.slider, the TOML
