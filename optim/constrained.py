@@ -62,6 +62,19 @@ class Rounds:
             raise ParameterError(f"[optimizer] penalty = {self.penalty:g} must be > 0 and growth {self.growth:g} > 1")
 
 
+def structure(problem: DesignProblem) -> DesignProblem:
+    """``problem`` without what its outputs do not depend on (start, title, bounds on quantities,
+    weights, the cost's weight): problems with the same structure share the compiled outputs program."""
+    return dataclasses.replace(
+        problem,
+        start=None,
+        title="",
+        cost_weight=0.0,
+        terms=tuple((q, 1.0) for q, _ in problem.terms),
+        limits=tuple((q, -math.inf, math.inf, None) for q, *_ in problem.limits),
+    )
+
+
 def scales(problem: DesignProblem) -> np.ndarray:
     """Each constraint's scale: given, or its largest |bound| (1 where both are 0)."""
     out = []
@@ -102,10 +115,20 @@ class QuantityEvaluator(SteadyEvaluator):
     def __init__(self, problem: DesignProblem):
         super().__init__(problem)
         self.outputs = {}  # design key -> outputs vector (numpy)
+        self.retarget(problem)
+
+    def retarget(self, problem: DesignProblem) -> None:
+        """Measure ``problem`` from now on, keeping the steady states found so far (a problem that
+        differs in its bounds, weights or start: a Pareto front's next point). The outputs kept per
+        design stay when the quantities are the same; the multipliers start at zero."""
+        if structure(problem) != structure(self.problem):
+            self.outputs = {}
+        self.problem = problem.with_objective(self.objective)
         self.lam = np.zeros(len(inequalities(problem, np.zeros(len(problem.limits)))[0]))
         self.mu, self.f_ref, self.offset = 10.0, None, 0.0
-        self._plain = jax.jit(lambda x, metrics: self.problem.outputs(metrics, x))
-        self._plain_jac = jax.jit(jax.jacfwd(lambda x, metrics: self.problem.outputs(metrics, x)))
+        shape = structure(problem)
+        self._plain = jax.jit(lambda x, metrics: shape.outputs(metrics, x))
+        self._plain_jac = jax.jit(jax.jacfwd(lambda x, metrics: shape.outputs(metrics, x)))
 
     # -------------------------------------------------------------- the outputs
     def _metrics(self, steady) -> dict:
@@ -125,7 +148,7 @@ class QuantityEvaluator(SteadyEvaluator):
         return self.outputs[key]
 
     def _program(self, steady, args):
-        key = ("outputs", dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
+        key = ("outputs", structure(self.problem), steady.period_revolutions, steady.active)
         if key not in _PROGRAMS:
             problem, objective, template = self.problem, self.objective, _light(steady)
 
@@ -179,7 +202,7 @@ class QuantityEvaluator(SteadyEvaluator):
             return value
         jac = np.asarray(jac)
         w = np.asarray([w for _, w in p.terms])
-        grad = (w @ jac[:n_terms] + jac[n_terms]) / ref
+        grad = (w @ jac[:n_terms] + p.cost_weight * jac[n_terms]) / ref
         for (j, slope), s in zip(rows, shifted):
             grad = grad + s * slope * jac[n_terms + 1 + int(j)]
         return value, grad
@@ -242,6 +265,7 @@ def solve(
     out: Path | None = None,
     resume: bool = False,
     progress: bool = True,
+    evaluator: QuantityEvaluator | None = None,
 ) -> dict:
     """Minimise a [`DesignProblem`][optim.design.DesignProblem] under its constraints (module docstring).
 
@@ -252,6 +276,8 @@ def solve(
         out: run folder: ``round_NN/`` per round (the optimiser's checkpoint and history) and
             ``rounds.json`` (the finished rounds); None: no checkpoints.
         resume: continue from ``out``: finished rounds are kept, the unfinished one resumed.
+        evaluator: an evaluator to reuse ([`QuantityEvaluator.retarget`][optim.constrained.QuantityEvaluator.retarget]
+            to ``problem``): its steady states warm-start this solve (the points of a Pareto front).
 
     Returns a dict: ``rounds`` (per round: the design, multipliers, penalty, objective and
     largest violation), ``history`` (every iterate of every round, with its terms' and
@@ -263,7 +289,11 @@ def solve(
     from .way_in import periodic_start
 
     tic = time.perf_counter()
-    ev = QuantityEvaluator(problem)
+    if evaluator is None:
+        ev = QuantityEvaluator(problem)
+    else:
+        ev = evaluator
+        ev.retarget(problem)
     ev.mu = rounds.penalty
     state = _load(out) if resume and out is not None and (Path(out) / "rounds.json").exists() else None
     found = None

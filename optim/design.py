@@ -286,20 +286,26 @@ class DesignProblem(AbstractProblem):
         return tuple(q for q, _ in self.terms) + tuple(c[0] for c in self.limits)
 
     def outputs(self, metrics: dict, x: Float[ArrayLike, " n"]) -> Float[Array, " k"]:
-        """The terms' quantities, the cost, then the limits' quantities at SI design ``x`` given
-        the headline ``metrics`` of its steady state (traceable)."""
+        """The terms' quantities, the cost's sum ``sum_j cost_reference / c_j`` over the clearance
+        variables (without ``cost_weight``: problems that differ in the weight share the program),
+        then the limits' quantities at SI design ``x`` given the headline ``metrics`` of its steady
+        state (traceable)."""
+        x = jnp.asarray(x, dtype=float)
         kin = Q.kinematic_values(
             self.mechanism(x), sorted({q for q in self.quantities if q in Q.KINEMATICS}), self.kinematic_samples
         )
         pick = lambda q: kin[q] if q in kin else jnp.asarray(self.quantity(metrics, q), dtype=float)
         terms = [pick(q) for q, _ in self.terms]
-        return jnp.stack(terms + [self.cost(jnp.asarray(x, dtype=float))] + [pick(c[0]) for c in self.limits])
+        cost = [self.cost_reference / x[i] for i, nm in enumerate(self.names) if nm.startswith("clearance_")]
+        cost_sum = sum(cost) if cost else jnp.zeros(())
+        return jnp.stack(terms + [cost_sum] + [pick(c[0]) for c in self.limits])
 
     def split(self, outputs) -> tuple[np.ndarray, float, np.ndarray]:
-        """(terms' values, cost, limits' values) of an ``outputs`` vector (numpy)."""
+        """(terms' values, cost (``cost_weight`` x the cost's sum), limits' values) of an ``outputs``
+        vector (numpy)."""
         v = np.asarray(outputs, dtype=float)
         n = len(self.terms)
-        return v[:n], float(v[n]), v[n + 1 :]
+        return v[:n], float(self.cost_weight * v[n]), v[n + 1 :]
 
 
 def statistic_of(values: Float[ArrayLike, " parts"], statistic: str) -> Float[Array, ""]:
