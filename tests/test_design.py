@@ -204,7 +204,7 @@ def test_constraints_hold_at_every_iterate_of_an_optimisation_path(exact_problem
     xs = np.array([[h[f"{n}_SI"] for n in prob.names] for h in res["history"]])
     assert len(xs) == 6
     c = prob.constraints(xs)
-    assert np.max(np.abs(c["stroke_error_m"])) <= prob.stroke_tolerance
+    assert np.max(np.abs(c["stroke_error_m"])) <= prob.derived.stroke_tolerance
     assert np.min(c["min_transmission_angle_deg"]) >= 40.0 - 1e-9
     assert np.min(c["assembly_margin_m"]) > 0.0
     assert prob.feasible(xs).all()
