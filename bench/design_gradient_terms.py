@@ -44,12 +44,12 @@ def main(argv=None):
     prob = B.build("design_9var", B.OBJECTIVE)
     u0 = np.asarray(prob.to_unit(np.asarray(study["optimum"]["adam_design_SI"])))
     pathwise = prob.with_objective(pathwise_of(prob.objective))
-    terms = jax.jit(lambda u: jnp.stack([pathwise.terms(prob.from_unit(u))[k] for k in TERMS]))
+    terms = jax.jit(lambda u: jnp.stack([pathwise.term_values(prob.from_unit(u))[k] for k in TERMS]))
     reverse = prob.with_objective(
         dataclasses.replace(prob.objective, window_adjoint=diffrax.RecursiveCheckpointAdjoint())
     )
     jac = np.asarray(
-        jax.jit(jax.jacrev(lambda u: jnp.stack([reverse.terms(prob.from_unit(u))[k] for k in TERMS])))(jnp.asarray(u0))
+        jax.jit(jax.jacrev(lambda u: jnp.stack([reverse.term_values(prob.from_unit(u))[k] for k in TERMS])))(jnp.asarray(u0))
     )
     secant = np.zeros_like(jac)
     for j in range(prob.n):

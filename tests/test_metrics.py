@@ -44,7 +44,7 @@ out = {}
 exact = O.Pathwise(t_start=0.0, t_end=1.2e-3, options=jc.SolveOptions(rtol=1e-10, atol=1e-10, max_steps=100_000))
 prob = design_problem(exact)
 x = jnp.asarray(prob.from_unit(prob.start_unit()))
-out["design_terms"] = {k: float(v).hex() for k, v in prob.terms(x).items()}
+out["design_terms"] = {k: float(v).hex() for k, v in prob.term_values(x).items()}
 out["design_pathwise"] = float(prob.objective_value(x)).hex()
 tsit5 = jc.SolveOptions.from_text("tsit5", max_steps=5_000)
 tiny = E.Ensemble(t_start=0.0, t_end=2e-3, window=1e-3, windows=2, window_options=tsit5)
