@@ -48,9 +48,8 @@ def main(argv=None):
     reverse = prob.with_objective(
         dataclasses.replace(prob.objective, window_adjoint=diffrax.RecursiveCheckpointAdjoint())
     )
-    jac = np.asarray(
-        jax.jit(jax.jacrev(lambda u: jnp.stack([reverse.term_values(prob.from_unit(u))[k] for k in TERMS])))(jnp.asarray(u0))
-    )
+    reverse_terms = jax.jacrev(lambda u: jnp.stack([reverse.term_values(prob.from_unit(u))[k] for k in TERMS]))
+    jac = np.asarray(jax.jit(reverse_terms)(jnp.asarray(u0)))
     secant = np.zeros_like(jac)
     for j in range(prob.n):
         lo, hi = u0.copy(), u0.copy()

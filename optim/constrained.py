@@ -34,11 +34,14 @@ import numpy as np
 
 from jaxcrank.physics.params import ParameterError
 
+from .cli import STEADY_OPTIMIZER, settings_from_config
 from .design import DesignProblem
-from .steady import _PROGRAMS, SteadyEvaluator, _key, _light, report
+from .steady import _PROGRAMS, RegimeGuard, SteadyEvaluator, _key, _light, report
 
 #: the inequality's margin in units of the constraint's scale: limits are approached from inside
 MARGIN = 1e-3
+#: the ``[optimizer]`` keys of the augmented Lagrangian (the others are the optimiser's)
+ROUND_KEYS = ("rounds", "penalty", "growth")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,6 +85,19 @@ def scales(problem: DesignProblem) -> np.ndarray:
         size = max(abs(v) for v in (lo, hi) if v is not None)
         out.append(s if s is not None else (size if size > 0 else 1.0))
     return np.asarray(out, dtype=float)
+
+
+def settings(table: dict):
+    """The optimiser settings and the [`Rounds`][optim.constrained.Rounds] of a problem file's
+    ``[optimizer]`` table: the steady-state default (Adam with the regime guard) changed by its
+    keys, the `ROUND_KEYS` going to the rounds.
+
+    Raises:
+        ParameterError: an unknown key or a bad value, naming it."""
+    values = dict(table)
+    rounds = Rounds(**{k: values.pop(k) for k in ROUND_KEYS if k in values})
+    values = values if "method" in values else {**STEADY_OPTIMIZER, **values}
+    return dataclasses.replace(settings_from_config(values), guard=RegimeGuard()), rounds
 
 
 def inequalities(problem: DesignProblem, values) -> tuple[np.ndarray, np.ndarray]:

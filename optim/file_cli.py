@@ -23,7 +23,6 @@ shaded) and ``result.json``:
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import math
 import shutil
@@ -38,21 +37,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 from jaxcrank import cache  # noqa: E402
 from jaxcrank.physics.params import ParameterError  # noqa: E402
 
-from . import constrained, spec  # noqa: E402
-from .cli import STEADY_OPTIMIZER, _final_mechanism, run_problem, settings_from_config  # noqa: E402
-from .steady import RegimeGuard, Steady  # noqa: E402
-
-#: the ``[optimizer]`` keys of the augmented Lagrangian (the others are the optimiser's)
-ROUND_KEYS = ("rounds", "penalty", "growth")
-
-
-def settings(table: dict):
-    """The optimiser settings and the rounds of an ``[optimizer]`` table: the steady-state
-    default (Adam with the regime guard) changed by its keys."""
-    values = dict(table)
-    rounds = constrained.Rounds(**{k: values.pop(k) for k in ROUND_KEYS if k in values})
-    values = values if "method" in values else {**STEADY_OPTIMIZER, **values}
-    return dataclasses.replace(settings_from_config(values), guard=RegimeGuard()), rounds
+from . import constrained, pareto, spec  # noqa: E402
+from .cli import _final_mechanism, run_problem, settings_from_config  # noqa: E402
+from .constrained import ROUND_KEYS, settings  # noqa: E402
+from .steady import Steady  # noqa: E402
 
 
 def run(args) -> int:
@@ -68,6 +56,8 @@ def run(args) -> int:
         table["method"] = args.method
     if args.iterations is not None:
         table["max_iterations"] = args.iterations
+    if tables.get("pareto") is not None:
+        return run_front(args, path, problem, {**tables, "optimizer": table})
     if not isinstance(problem.objective, Steady):  # a windowed objective bounds no quantity: the plain run
         unknown = set(table) & set(ROUND_KEYS)
         if unknown:
@@ -119,6 +109,28 @@ def run(args) -> int:
         bounds = f"[{lo:g}, {hi:g}]"
         print(f"  {c['quantity']} = {c['value']:.6g} in {bounds}: {'satisfied' if c['satisfied'] else 'VIOLATED'}")
     print(f"simulate the final design: {result['simulate_command']}")
+    return 0
+
+
+def run_front(args, path: Path, problem, tables: dict) -> int:
+    """Trace the Pareto front of a problem file with a ``[pareto]`` table into ``args.out``
+    ([`optim.pareto.run_front`][]: ``pareto.json``, ``pareto.csv``, ``pareto.png``, ``point_NN/``)."""
+    pareto.front_settings(problem, tables["pareto"])  # a bad table stops the run before any file is written
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    if not args.no_cache:
+        try:
+            cache.enable(args.cache_dir)
+        except OSError as err:
+            print(f"jaxcrank optimize: no compilation cache ({err})", file=sys.stderr)
+    if path.resolve() != (out / "problem.toml").resolve():
+        shutil.copyfile(path, out / "problem.toml")
+    state = pareto.run_front(problem, tables, out, progress=not args.quiet, resume=args.resume)
+    front = [p for p in state["points"] if p["nondominated"]]
+    print(
+        f"{problem.description}: {len(front)} of {len(state['points'])} points on the front, "
+        f"hypervolume {state['hypervolume']:.6g}; {out / 'pareto.csv'}, {out / 'pareto.png'}"
+    )
     return 0
 
 
