@@ -887,6 +887,40 @@ def table_animate() -> str:
     return body + source("animate")
 
 
+def table_calibration_bench() -> str:
+    d = results("calibration")
+    names = list(d["true_design"]["SI"])
+    labels = {
+        "lm_near": "Levenberg-Marquardt, exact Jacobian, near start",
+        "cma_near": "CMA-ES, near start",
+        "lm_far": "Levenberg-Marquardt, exact Jacobian, start 30 % off",
+        "cma_far": "CMA-ES, start 30 % off",
+        "hybrid_far": "Levenberg-Marquardt from CMA-ES's best (start 30 % off)",
+    }
+    rows = []
+    for key, label in labels.items():
+        m = d["methods"].get(key)
+        if m is None:
+            continue
+        errors = m["relative_errors"]
+        misfit = m.get("misfit_final", m.get("best_misfit"))
+        cpu = m.get("cpu_seconds_with_cma", m["cpu_seconds"])
+        rows.append(
+            [label] + [f"{100 * errors[n]:+.2f} %" for n in names] + [misfit, m["evaluations"], cpu, m["targets_met"]]
+        )
+    header = ["method"] + [f"{n} error" for n in names]
+    header += ["misfit", "evaluations", "CPU [s] incl. compile", "targets met"]
+    t = d["trace"]
+    return (
+        f"True design: {', '.join(f'{n} = {v:g}' for n, v in d['true_design']['SI'].items())} "
+        f"({d['true_design']['regime']}, period {d['true_design']['period_revolutions']}); "
+        f"{t['samples']} samples of `{d['signal']}` over one revolution, noise {100 * t['noise_fraction_of_rms']:g} % "
+        f"of the signal's RMS; misfit at the true design {fmt(t['misfit_at_true_design'], 4)}.\n\n"
+        + table(header, rows)
+        + source("calibration")
+    )
+
+
 TABLES = {
     "animate": table_animate,
     "compile": table_compile,
@@ -906,6 +940,7 @@ TABLES = {
     "optim": table_optim,
     "design_gradient": table_design_gradient,
     "window_gradients": table_window_gradients,
+    "calibration_bench": table_calibration_bench,
     "headline": headline,
 }
 

@@ -83,23 +83,24 @@ def frames(sim: Simulation) -> model.Frame:
     return _frames(model.compile_model(sim.mechanism), sim.ts, sim.ys)
 
 
-def trajectory(sim: Simulation, frames_: model.Frame | None = None) -> dict[str, Float[np.ndarray, " n"]]:
-    """Named output columns of a simulation (SI, angles in degrees;
-    [`columns`][jaxcrank.analysis.outputs.columns] gives their units); ``frames_``: its
-    [`frames`][jaxcrank.analysis.outputs.frames] where already evaluated."""
-    mech = sim.mechanism
+def frame_columns(mech, frames_: model.Frame) -> dict[str, Array]:
+    """The named columns of [`trajectory`][jaxcrank.analysis.outputs.trajectory] from ``frames_``
+    ([`frames`][jaxcrank.analysis.outputs.frames], or ``jax.vmap(model.evaluate)`` of any sample
+    times) as JAX arrays: traceable (``jax.jacfwd`` through a solve), SI, angles in degrees;
+    [`columns`][jaxcrank.analysis.outputs.columns] gives their order and units. A mechanism
+    without a transmission angle gets zero transmission columns here (``columns`` leaves them out)."""
     tree = model.compile_model(mech).tree
-    f = frames(sim) if frames_ is None else frames_
+    f = frames_
     cols = {"t": f.t}
     for prefix, q, qd, qdd in (("", f.q, f.qd, f.qdd), ("ideal_", f.ideal_q, f.ideal_qd, f.ideal_qdd)):
         for i, b in enumerate(tree.bodies):
-            values = (q[:, i, 0], q[:, i, 1], q[:, i, 2] * DEG, qd[:, i, 0], qd[:, i, 1], qd[:, i, 2])
-            values += (qdd[:, i, 0], qdd[:, i, 1], qdd[:, i, 2])
+            values = (q[..., i, 0], q[..., i, 1], q[..., i, 2] * DEG, qd[..., i, 0], qd[..., i, 1], qd[..., i, 2])
+            values += (qdd[..., i, 0], qdd[..., i, 1], qdd[..., i, 2])
             for (k, _), v in zip(_BODY_COLUMNS, values):
                 cols[f"{prefix}{b}_{k}"] = v
     for m, j in enumerate(tree.joints):
-        values = (f.eccentricity[:, m, 0], f.eccentricity[:, m, 1], f.penetration[:, m], f.normal_force[:, m])
-        values += (f.friction_force[:, m], f.slip_speed[:, m], f.joint_force[:, m, 0], f.joint_force[:, m, 1])
+        values = (f.eccentricity[..., m, 0], f.eccentricity[..., m, 1], f.penetration[..., m], f.normal_force[..., m])
+        values += (f.friction_force[..., m], f.slip_speed[..., m], f.joint_force[..., m, 0], f.joint_force[..., m, 1])
         for (pattern, _), v in zip(_JOINT_COLUMNS, values):
             cols[pattern.format(j)] = v
     cols.update(driving_moment=f.driving_moment, ideal_driving_moment=f.ideal_driving_moment)
@@ -108,6 +109,15 @@ def trajectory(sim: Simulation, frames_: model.Frame | None = None) -> dict[str,
     )
     for k in ("kinetic_energy", "potential_energy", "contact_energy", "driver_work", "dissipated_work"):
         cols[k] = getattr(f, k)
+    return cols
+
+
+def trajectory(sim: Simulation, frames_: model.Frame | None = None) -> dict[str, Float[np.ndarray, " n"]]:
+    """Named output columns of a simulation (SI, angles in degrees;
+    [`columns`][jaxcrank.analysis.outputs.columns] gives their units); ``frames_``: its
+    [`frames`][jaxcrank.analysis.outputs.frames] where already evaluated."""
+    mech = sim.mechanism
+    cols = frame_columns(mech, frames(sim) if frames_ is None else frames_)
     return {k: np.asarray(cols[k]) for k in columns(mech)}
 
 

@@ -1,8 +1,8 @@
 """Command line: ``jaxcrank simulate [--config FILE | --design RESULT_JSON] [--out DIR]
 [--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]``, ``jaxcrank steady``
-([`jaxcrank.runs.steady_cli`][]), ``jaxcrank regimes`` ([`jaxcrank.runs.regimes_cli`][]) and
-``jaxcrank optimize`` ([`optim.cli`][]), ``jaxcrank assemble``, ``jaxcrank draw`` and ``jaxcrank animate``
-([`jaxcrank.runs.view_cli`][]).
+([`jaxcrank.runs.steady_cli`][]), ``jaxcrank regimes`` ([`jaxcrank.runs.regimes_cli`][]),
+``jaxcrank optimize`` ([`optim.cli`][]), ``jaxcrank fit`` ([`optim.fit_cli`][]), ``jaxcrank assemble``,
+``jaxcrank draw`` and ``jaxcrank animate`` ([`jaxcrank.runs.view_cli`][]).
 
 A command's options are added, and JAX imported, only once the command is named:
 ``jaxcrank --help`` lists the commands without loading JAX."""
@@ -24,6 +24,7 @@ COMMANDS = {
     "steady": "find the steady state: periodic orbit and its Floquet multipliers, or chaos and long-run statistics",
     "regimes": "classify the steady-state regime (periodic and its period, or not) of every design of a sweep spec",
     "optimize": "minimise the RMS transmission-angle error (paper Eq. 19) or a design objective with optax",
+    "fit": "calibrate parameters (clearances, restitution, ...) against a measured trace, with confidence intervals",
     "assemble": "assemble a linkage at a driver angle: the poses, each dyad's branch, the lines that keep it",
     "draw": "draw a linkage at a driver angle (PNG, SVG, PDF) and print its kinematic summary",
     "animate": "animate a run's mechanism (GIF, MP4, HTML), the ideal one beside it and the pins in their holes",
@@ -210,6 +211,10 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
             from . import view_cli
 
             (view_cli.add_draw_arguments if name == "draw" else view_cli.add_animate_arguments)(p)
+        elif name == "fit":
+            from optim import fit_cli
+
+            fit_cli.add_arguments(p)
         else:
             from optim import cli as optim_cli
 
@@ -253,6 +258,10 @@ def main(argv=None) -> int:
             from optim import cli as optim_cli
 
             return optim_cli.run(args)
+        if args.command == "fit":
+            from optim import fit_cli
+
+            return fit_cli.run(args)
         if args.command == "assemble":
             from . import assemble_cli
 
