@@ -52,6 +52,7 @@ from jaxcrank.physics.parameters import set_parameter, set_parameters
 from jaxcrank.physics.params import ParameterError
 from jaxcrank.runs.config import dumps
 
+from .steady import warm_solve
 from .trace import Trace, check_signal, model_signal, phase_times
 
 #: the fit's steady-state settings: periods up to 2 revolutions; solves at rtol = atol = 1e-8 with
@@ -235,10 +236,12 @@ class Calibration:
         key = tuple(float(v) for v in np.asarray(x, dtype=float))
         if key not in self._steady:
             mech = self.mechanism(jnp.asarray(key))
-            steady = S.steady_state(mech, self.options, warm_start=self.last, throw=False)
-            settled = steady.revolutions.get("settle", 0) >= self.options.settle_revolutions
-            if again and self.last is not None and not steady.periodic and not settled:
-                steady = S.steady_state(mech, self.options, throw=False)
+            steady = warm_solve(
+                lambda warm: S.steady_state(mech, self.options, warm_start=warm, throw=False),
+                self.last,
+                self.options.settle_revolutions,
+                again=again,
+            )
             if steady.periodic:
                 self.last = steady
             if len(self._steady) >= 4:

@@ -68,14 +68,7 @@ def run(args) -> int:
     mech_config.check_resume(out, args.resume)
     if not args.resume and (out / "rounds.json").exists():
         raise ParameterError(f"{out} already holds a run (rounds.json): pass --resume or choose another --out")
-    out.mkdir(parents=True, exist_ok=True)
-    if not args.no_cache:
-        try:
-            cache.enable(args.cache_dir)
-        except OSError as err:
-            print(f"jaxcrank optimize: no compilation cache ({err})", file=sys.stderr)
-    if path.resolve() != (out / "problem.toml").resolve():
-        shutil.copyfile(path, out / "problem.toml")
+    _prepare(args, path, out)
     if not args.quiet:
         print(f"optimize: {problem.description}: classifying starts (compiling on a first run)", file=sys.stderr)
     res = constrained.solve(problem, opt, rounds, out=out, resume=args.resume, progress=not args.quiet)
@@ -112,11 +105,9 @@ def run(args) -> int:
     return 0
 
 
-def run_front(args, path: Path, problem, tables: dict) -> int:
-    """Trace the Pareto front of a problem file with a ``[pareto]`` table into ``args.out``
-    ([`optim.pareto.run_front`][]: ``pareto.json``, ``pareto.csv``, ``pareto.png``, ``point_NN/``)."""
-    pareto.front_settings(problem, tables["pareto"])  # a bad table stops the run before any file is written
-    out = args.out
+def _prepare(args, path: Path, out: Path) -> None:
+    """Create the run folder ``out``, turn on the compilation cache (unless ``--no-cache``) and
+    copy the problem file into it as ``problem.toml``."""
     out.mkdir(parents=True, exist_ok=True)
     if not args.no_cache:
         try:
@@ -125,6 +116,14 @@ def run_front(args, path: Path, problem, tables: dict) -> int:
             print(f"jaxcrank optimize: no compilation cache ({err})", file=sys.stderr)
     if path.resolve() != (out / "problem.toml").resolve():
         shutil.copyfile(path, out / "problem.toml")
+
+
+def run_front(args, path: Path, problem, tables: dict) -> int:
+    """Trace the Pareto front of a problem file with a ``[pareto]`` table into ``args.out``
+    ([`optim.pareto.run_front`][]: ``pareto.json``, ``pareto.csv``, ``pareto.png``, ``point_NN/``)."""
+    pareto.front_settings(problem, tables["pareto"])  # a bad table stops the run before any file is written
+    out = args.out
+    _prepare(args, path, out)
     state = pareto.run_front(problem, tables, out, progress=not args.quiet, resume=args.resume)
     front = [p for p in state["points"] if p["nondominated"]]
     print(

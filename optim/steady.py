@@ -177,6 +177,17 @@ def forget_programs() -> None:
     _PROGRAMS.clear()
 
 
+def warm_solve(solve, last, settle_revolutions: int, again: bool = True) -> S.SteadyState:
+    """The steady state ``solve(warm_start)`` finds warm-started from ``last`` (the last periodic
+    one, or None); a warm start that finds no orbit without a full settle of
+    ``settle_revolutions`` is redone from rest (``solve(None)``) when ``again``."""
+    steady = solve(last)
+    settled = steady.revolutions.get("settle", 0) >= settle_revolutions
+    if again and last is not None and not steady.periodic and not settled:
+        steady = solve(None)
+    return steady
+
+
 def _key(x) -> tuple[float, ...]:
     """A design as the key of the evaluator's cached steady states."""
     return tuple(float(v) for v in np.asarray(x, dtype=float))
@@ -220,10 +231,11 @@ class SteadyEvaluator:
             return self._kept[1]
         if key not in self._steady:
             mech = self.problem.mechanism(jnp.asarray(key))
-            steady = self.objective.solve(mech, warm_start=self.last)
-            settled = steady.revolutions.get("settle", 0) >= self.objective.options.settle_revolutions
-            if self.last is not None and not steady.periodic and not settled:
-                steady = self.objective.solve(mech)
+            steady = warm_solve(
+                lambda warm: self.objective.solve(mech, warm_start=warm),
+                self.last,
+                self.objective.options.settle_revolutions,
+            )
             if steady.periodic:
                 self.last = steady
             if len(self._steady) >= 4:
