@@ -33,6 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxcrank.physics.params import ParameterError
+from jaxcrank.runs.sweep_table import atomic_write
 
 from .cli import STEADY_OPTIMIZER, settings_from_config
 from .design import DesignProblem
@@ -412,9 +413,7 @@ def _best(problem: DesignProblem, ev: QuantityEvaluator, designs) -> np.ndarray:
 def _save(out, state) -> None:
     path = Path(out) / "rounds.json"
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(state, indent=1))
-    tmp.replace(path)
+    atomic_write(path, lambda f: f.write(json.dumps(state, indent=1).encode()))
 
 
 def _load(out) -> dict:

@@ -45,6 +45,7 @@ from pathlib import Path
 
 from jaxcrank.numerics.shooting import SteadyOptions
 from jaxcrank.physics.params import ParameterError
+from jaxcrank.runs.sweep_table import atomic_write
 
 from .calibrate import FIT_STEADY, FitParameter
 from .least_squares import LMSettings
@@ -246,9 +247,8 @@ def run(args) -> int:
 
     def save(row):
         if row["accepted"]:
-            tmp = checkpoint.with_suffix(".tmp")
-            tmp.write_text(json.dumps({**row, "config": cfg, "trace": str(args.data)}, indent=2))
-            tmp.replace(checkpoint)
+            text = json.dumps({**row, "config": cfg, "trace": str(args.data)}, indent=2)
+            atomic_write(checkpoint, lambda f: f.write(text.encode()))
 
     result = fit_module.fit(
         spec["mechanism"],

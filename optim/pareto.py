@@ -45,6 +45,7 @@ import numpy as np
 
 from jaxcrank.physics.parameters import parameter_unit
 from jaxcrank.physics.params import ParameterError
+from jaxcrank.runs.sweep_table import atomic_write
 
 from . import constrained
 from . import quantities as Q
@@ -249,9 +250,7 @@ def _plain(value):
 
 
 def _save(path: Path, state: dict) -> None:
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(_plain(state), indent=1))
-    tmp.replace(path)
+    atomic_write(path, lambda f: f.write(json.dumps(_plain(state), indent=1).encode()))
 
 
 def run_front(problem: DesignProblem, tables: dict, out, progress: bool = True, resume: bool = False) -> dict:
