@@ -682,3 +682,20 @@ def test_cli_steady_on_the_four_bar(tmp_path):
     assert "rocker_angle" in header and "ideal_rocker_angle" in header
     for name in ("poincare_section.png", "config.toml", "figures/rocker_angle.png"):
         assert (out / name).exists(), name
+
+
+def test_a_shooting_that_fails_gives_the_long_run_statistics_when_asked(paper):
+    """Newton capped at 0 iterations on a 2-revolution settle fails; with statistics_on_failure the
+    result is the long-run statistics, labelled not periodic with the reason, every metric finite,
+    each statistic's value inside its 95 % interval: a design always has a value."""
+    loose = shooting.STEADY_DEFAULTS.replace(rtol=1e-6, atol=1e-6)
+    o = jc.SteadyOptions(
+        settle_revolutions=2, recurrence_tol=1e3, max_newton=0, statistics_revolutions=2, batch_revolutions=1,
+        samples_per_revolution=90, solve=loose, statistics_on_failure=True,
+    )  # fmt: skip
+    out = steady_state(paper, o)
+    assert out.ok and out.regime == "not periodic" and out.period_revolutions == 0
+    assert "Newton shooting for period(s) [1, 2] failed" in out.note and "long-run statistics" in out.note
+    assert all(np.isfinite(float(v)) for v in out.metrics.values())
+    for s in out.statistics.values():
+        assert s["ci95_low"] <= s["value"] <= s["ci95_high"]

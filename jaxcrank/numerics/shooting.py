@@ -104,6 +104,11 @@ class SteadyOptions:
         samples_per_revolution: sample times per revolution of the orbit and of the RMS
             metrics (default 3600: 0.1 deg of crank angle; >= 2).
         solve: the settings of every solve (`STEADY_DEFAULTS`: tsit5, rtol = atol = 1e-10).
+        statistics_on_failure: where Newton shooting fails for every candidate period (it
+            does not converge or diverges, e.g. at the map's noise floor, or on an orbit
+            that grazes a contact), report the long-run statistics as not periodic, with
+            the reason in ``SteadyState.note`` (True), or a failed result naming what to
+            change (False, the default).
 
     Raises:
         ParameterError: for a setting outside its range (the message names it).
@@ -118,6 +123,7 @@ class SteadyOptions:
     batch_revolutions: int = 2
     samples_per_revolution: int = 3600
     solve: SolveOptions = STEADY_DEFAULTS
+    statistics_on_failure: bool = False
 
     def __post_init__(self):
         check_arguments(

@@ -101,6 +101,8 @@ class SteadyState(eqx.Module):
             tangents), ``orbit``, ``statistics`` (with a tangent).
         options: the solve settings used.
         samples_per_revolution: sample times per revolution of the orbit and of its RMS metrics.
+        note: why a motion is reported as not periodic though its section points recurred
+            (``SteadyOptions.statistics_on_failure``: Newton shooting failed there); empty otherwise.
     """
 
     mechanism: Mechanism
@@ -122,6 +124,7 @@ class SteadyState(eqx.Module):
     revolutions: dict
     options: SolveOptions = eqx.field(static=True)
     samples_per_revolution: int = eqx.field(static=True)
+    note: str = eqx.field(static=True, default="")
 
     @property
     def ok(self) -> bool:
@@ -225,6 +228,7 @@ def steady_state(
     out = _steady(
         mech, y0, warm_k, o.settle_revolutions, o.max_period, o.recurrence_tol, o.newton_tol, o.max_newton,
         o.statistics_revolutions, o.batch_revolutions, o.samples_per_revolution, o.solve, counts, say,
+        o.statistics_on_failure,
     )  # fmt: skip
     if throw and out.result != RESULTS.successful:
         raise SteadyStateError(
@@ -240,7 +244,7 @@ def _say(text: str) -> None:
 
 
 def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, max_newton, n_stats, batch, samples,
-            options, counts, say):  # fmt: skip
+            options, counts, say, fallback=False):  # fmt: skip
     m = shooting.dynamic_size(mech)
     n_settle = warm_k if warm_k else settle
     say(f"settling {n_settle} revolution(s) from {'the warm start' if warm_k else 'rest'}")
@@ -269,9 +273,10 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
     near = not candidates and bool(distances) and min(distances.values()) <= 100 * recurrence_tol
     if near:
         candidates = [min(distances, key=distances.get)]
-    failure = None
+    failure, note, tried = None, "", set()
     for k in candidates:
         found = _shoot(mech, z_end, k, newton_tol, max_newton, samples, options, counts, say, empty)
+        tried.add(k)
         if isinstance(found, SteadyState):
             return found
         if found == "unstable":
@@ -282,9 +287,16 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
             if warm_k:  # the warm start was too far: settle from there and start over
                 say("shooting from the warm start failed: settling from there")
                 return _steady(mech, section[-1], 0, settle, max_period, recurrence_tol, newton_tol, max_newton,
-                               n_stats, batch, samples, options, counts, say)  # fmt: skip
+                               n_stats, batch, samples, options, counts, say, fallback)  # fmt: skip
             result, res, its = failure
-            return SteadyState(result=result, regime=NOT_PERIODIC, residual=res, **dict(empty, newton_iterations=its))
+            if not fallback:
+                return SteadyState(
+                    result=result, regime=NOT_PERIODIC, residual=res, **dict(empty, newton_iterations=its)
+                )
+            note = (
+                f"Newton shooting for period(s) {sorted(tried)} failed (residual {float(res):.3g} scaled units after "
+                f"{its} iteration(s)): {RESULTS[result]}; the value is the long-run statistics"
+            )
     recurrence = float(jnp.max(jnp.abs(z_end - section[-2, :m])))
     say(f"no period up to {max_period} revolution(s): Lyapunov exponent and statistics over {n_stats} revolutions")
     jac, result, lyapunov, statistics, sections = shooting.not_periodic(
@@ -295,7 +307,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
     z_last = sections[-1]
     # a late settler: the statistics run's own section points recur, so shoot from its end
     late = shooting.recurrence(sections, m, max_period, recurrence_tol)[1].tolist()
-    for k in [k for k, d in enumerate(late, start=1) if d <= recurrence_tol]:
+    for k in [k for k, d in enumerate(late, start=1) if d <= recurrence_tol and k not in tried]:
         say(f"the statistics run settled: its section points recur with period {k}")
         found = _shoot(mech, z_last, k, newton_tol, max_newton, samples, options, counts, say, empty)
         if isinstance(found, SteadyState):
@@ -311,6 +323,7 @@ def _steady(mech, y0, warm_k, settle, max_period, recurrence_tol, newton_tol, ma
         floquet_multipliers=jnp.asarray(shooting.multipliers(jac, active)),
         neutral=_neutral_names(mech, active),
         lyapunov_exponent_per_s=jnp.asarray(lyapunov),
+        note=note,
     )
     return SteadyState(result=RESULTS.successful, regime=NOT_PERIODIC, residual=jnp.asarray(recurrence), **fields)
 
