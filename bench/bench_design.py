@@ -77,7 +77,12 @@ PROBLEMS = {
     "short_fast": (0.200, 750.0),
     "mid_slow": (0.220, 480.0),
     "long_fast": (0.240, 720.0),
+    "long_slow": (0.260, 420.0),
+    "longest_slowest": (0.280, 360.0),
 }
+#: the upper bound of the minimum transmission angle, deg, where the preset's 70 deg cannot
+#: reach the stroke at the shortest rod (the problem's own check: 2 L2 cos(alpha) >= stroke)
+MAX_TRANSMISSION_DEG = {"long_slow": 65.0, "longest_slowest": 65.0}
 #: the held-out evaluation
 HELDOUT = dict(
     revolutions=20,
@@ -118,7 +123,11 @@ def build(name: str):
     problem = design_problem(objective_from_config({"method": "steady_state", **STEADY}))
     base = eqx.tree_at(lambda m: m.driver.speed, problem.base, rpm * 2.0 * math.pi / 60.0)
     title = f"design: {problem.n} variables, stroke {stroke * 1e3:g} mm, {rpm:g} rpm"
-    return dataclasses.replace(problem, base=base, stroke=stroke, title=title)
+    derived = dataclasses.replace(problem.derived, stroke=stroke)
+    upper = list(problem.upper)
+    if name in MAX_TRANSMISSION_DEG:
+        upper[problem.names.index("min_transmission_angle")] = math.radians(MAX_TRANSMISSION_DEG[name])
+    return dataclasses.replace(problem, base=base, derived=derived, upper=tuple(upper), title=title)
 
 
 def heldout_program(problem, heldout=HELDOUT):
@@ -161,23 +170,22 @@ def heldout_program(problem, heldout=HELDOUT):
     return jax.jit(lambda x: jax.vmap(lambda d, dy: one(x, d, dy))(dphis, dpos))
 
 
-class Budget(Exception):
-    """The method's CPU budget is spent."""
-
-
 def timed_evaluator(problem, budget: float):
     """A :class:`optim.steady.SteadyEvaluator` that records every evaluation
-    (``trace``: CPU seconds since its creation, value, unit design, regime) and raises
-    `Budget` at the first evaluation after ``budget`` CPU seconds."""
+    (``trace``: CPU seconds since its creation, value, unit design, regime) under a CPU-time
+    :class:`optim.budget.Budget` of ``budget`` s, which every phase checks before its next solve
+    or compilation (the regime guard's and the line search's trial points included): it raises
+    :class:`optim.budget.BudgetSpent` there."""
+    from optim.budget import Budget, BudgetSpent
     from optim.steady import SteadyEvaluator
 
     class Timed(SteadyEvaluator):
         def __init__(self):
             super().__init__(problem)
-            self.t0, self.trace = time.process_time(), []
+            self.budget, self.trace = Budget(budget, clock=time.process_time), []
 
         def elapsed(self):
-            return time.process_time() - self.t0
+            return self.budget.elapsed()
 
         def _record(self, x, value, info):
             regime = info.get("regime", "failed") if info.get("ok", False) else "failed"
@@ -186,20 +194,20 @@ def timed_evaluator(problem, budget: float):
             self.trace.append((self.elapsed(), value, unit, regime))
 
         def value(self, x):
-            if self.elapsed() > budget:
-                raise Budget
             try:
                 value, info = super().value(x)
+            except BudgetSpent:
+                raise
             except Exception:  # noqa: BLE001 - a solver error: a failed design
                 value, info = math.nan, {"ok": False}
             self._record(x, value, info)
             return value, info
 
         def value_and_grad(self, x):
-            if self.elapsed() > budget:
-                raise Budget
             value, grad, info = super().value_and_grad(x)
             self._record(x, value, info)
+            if self.first_gradient is not None and getattr(self, "first_gradient_cpu", None) is None:
+                self.first_gradient_cpu = self.elapsed()  # CPU s from the evaluator's making (the way in included)
             return value, grad, info
 
         def unit_value(self, u):
@@ -244,9 +252,10 @@ def run_ours(ev, problem, seed, info, adam: bool):
     search = periodic_start(problem, count=CLASSIFY, seed=seed, evaluator=ev, progress=False)
     info["start_search"] = search.describe()
     info["classification_cpu_s"] = ev.elapsed()
-    if not search.periodic:
-        info["note"] = "no periodic design among the classified ones: no gradient phase"
+    if search.stopped:
         return
+    if not search.periodic:
+        info["note"] = "the lowest value classified is not periodic: no gradient there"
     settings = Settings(
         optimizer=make_adam(LEARNING_RATE) if adam else ProjectedLBFGS(),
         max_iterations=10_000,
@@ -255,10 +264,9 @@ def run_ours(ev, problem, seed, info, adam: bool):
         patience=5,
         guard=RegimeGuard(max_halvings=3),
     )
-    try:
-        res = optimize(search.problem, settings, progress=False, evaluator=ev)
-    finally:  # also when the budget ends the run (Budget raised from an evaluation)
-        info.update(gradient_compile_s=ev.compile_seconds, finished_cpu_s=ev.elapsed(), stop_reason="budget spent")
+    res = optimize(search.problem, settings, progress=False, evaluator=ev)
+    first = getattr(ev, "first_gradient_cpu", None)
+    info.update(gradient_compile_s=ev.compile_seconds, finished_cpu_s=ev.elapsed(), first_gradient_cpu_s=first)
     info.update(
         iterations=len(res["history"]),
         converged=res["converged"],
@@ -311,6 +319,7 @@ def run_part(name: str, seed: int, budget: float, methods, path: Path, update: b
     jax.config.update("jax_enable_x64", True)
     from _common import machine
 
+    from optim.budget import BudgetSpent
     from optim.steady import SteadyEvaluator, forget_programs
 
     tic_all = time.perf_counter()
@@ -334,7 +343,7 @@ def run_part(name: str, seed: int, budget: float, methods, path: Path, update: b
                 run_ours(ev, problem, seed, info, adam=method == "ours_adam")
             else:
                 {"cma": run_cma, "tpe": run_tpe}[method](ev, problem.n, start, seed)
-        except Budget:
+        except BudgetSpent:
             pass
         runs[method] = (ev.trace, info)
         best = min((v for _, v, _, _ in ev.trace), default=math.inf)

@@ -57,7 +57,7 @@ from jaxcrank.physics.params import ParameterError
 from .design import TERMS
 from .objective import EQ19
 from .objective_config import objective_config, objective_from_config
-from .optimize import STEADY_LEARNING_RATE, Settings, default_settings, optimize
+from .optimize import STEADY_LEARNING_RATE, Settings, default_settings, optimize, steady_evaluator
 from .optimizers import OPTIMIZERS, from_settings
 from .presets import PROBLEMS, design_problem, paper_reference
 from .presets import problem as preset_problem
@@ -351,7 +351,10 @@ def run_problem(args, problem: Problem, settings: Settings, name: str) -> int:
         # the steady-state gradient is zero outside the periodic regime: start from a periodic design
         if not args.quiet:
             print(f"optimize: {problem.description}: classifying starts (compiling on a first run)", file=sys.stderr)
-        found = periodic_start(problem, seed=settings.seed, progress=not args.quiet)
+        # one time budget (max_seconds) for the way in and the run
+        found = periodic_start(
+            problem, seed=settings.seed, progress=not args.quiet, evaluator=steady_evaluator(problem, settings)
+        )
         problem = found.problem  # optimize.toml records the chosen start: --resume continues from it
     (out / "optimize.toml").write_text(tomli_w.dumps(_drop_none(resolved(problem, settings, name))))
     if not args.quiet and found is None:  # the first evaluation compiles (and settles from rest)
@@ -387,7 +390,7 @@ def run_problem(args, problem: Problem, settings: Settings, name: str) -> int:
             "failed_designs": int((grid.feasible & ~grid.ok).sum()),
         }
 
-    f_start = hist[0]["objective_deg"]
+    f_start = hist[0]["objective_deg"] if hist else res["final_objective"]
     result = {
         "problem": problem.description,
         "names": list(problem.names),
@@ -396,13 +399,14 @@ def run_problem(args, problem: Problem, settings: Settings, name: str) -> int:
         "stop_reason": res["stop_reason"],
         "iterations": len(hist),
         "evaluations": res["evaluations"],
-        "start_design_SI": [hist[0][f"{n}_SI"] for n in problem.names],
+        "start_design_SI": [hist[0][f"{n}_SI"] for n in problem.names] if hist else res["final"],
         "start_objective_deg": f_start,
         "final_design_SI": res["final"],
         "final_objective_deg": res["final_objective"],
         "reduction_percent": 100.0 * (f_start - res["final_objective"]) / f_start,
         **_final_mechanism(problem, res["final"], out),
         "wall_seconds_this_call": wall,
+        "time_to_first_gradient_s": res.get("seconds", {}).get("first_gradient"),
         "seconds_this_call": {
             **({"classifying_starts": found.seconds} if found is not None else {}),
             **{f"{k}_optimizer": v for k, v in res.get("seconds", {}).items()},

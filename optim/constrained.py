@@ -37,7 +37,7 @@ from jaxcrank.runs.sweep_table import atomic_write
 
 from .cli import STEADY_OPTIMIZER, settings_from_config
 from .design import DesignProblem
-from .steady import _PROGRAMS, RegimeGuard, SteadyEvaluator, _key, _light, report
+from .steady import RegimeGuard, SteadyEvaluator, _key, _light, report
 
 #: the inequality's margin in units of the constraint's scale: limits are approached from inside
 MARGIN = 1e-3
@@ -164,19 +164,15 @@ class QuantityEvaluator(SteadyEvaluator):
             )
         return self.outputs[key]
 
-    def _program(self, steady, args):
+    def _program_spec(self, steady):
         key = ("outputs", structure(self.problem), steady.period_revolutions, steady.active)
-        if key not in _PROGRAMS:
-            problem, objective, template = self.problem, self.objective, _light(steady)
+        problem, objective, template = self.problem, self.objective, _light(steady)
 
-            def f(x, section_state, monodromy):
-                light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
-                return problem.outputs(objective.rms_at(problem.mechanism(x), light, every=True), x)
+        def f(x, section_state, monodromy):
+            light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
+            return problem.outputs(objective.rms_at(problem.mechanism(x), light, every=True), x)
 
-            tic = time.perf_counter()
-            _PROGRAMS[key] = jax.jit(lambda *a: (f(*a), jax.jacfwd(f)(*a))).lower(*args).compile()
-            self.compile_seconds += time.perf_counter() - tic
-        return _PROGRAMS[key]
+        return key, lambda *a: (f(*a), jax.jacfwd(f)(*a))
 
     def outputs_and_jacobian(self, x) -> tuple[np.ndarray, np.ndarray, dict]:
         """The outputs at SI design ``x``, their Jacobian (k, n) per SI unit, and the regime
@@ -191,6 +187,7 @@ class QuantityEvaluator(SteadyEvaluator):
         if steady.periodic:
             args = (jnp.asarray(x), steady.section_state, steady.monodromy)
             out, jac = self._program(steady, args)(*args)
+            self._gradient_done()
         else:
             metrics = self._metrics(steady)
             out, jac = self._plain(jnp.asarray(x), metrics), self._plain_jac(jnp.asarray(x), metrics)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import time
 from pathlib import Path
 
@@ -45,6 +46,7 @@ from jaxcrank.physics.params import ParameterError
 
 from . import checkpoint
 from . import quasi_newton as qn
+from .budget import Budget, BudgetSpent
 from .objective import value_and_grad
 from .optimizers import LBFGS, AbstractLineSearchOptimizer, AbstractOptimizer, adam
 from .problem import AbstractProblem
@@ -70,8 +72,11 @@ class Settings:
         starts: designs to optimise from ([`multistart`][optim.starts.multistart]): the problem's start, then
             ``starts - 1`` scrambled Sobol points of the box; 1 runs [`optimize`][optim.optimize.optimize] alone.
         seed: seed of those Sobol points.
-        max_seconds: wall-time budget of one [`optimize`][optim.optimize.optimize] call, s (None: none); the
-            run stops after the iteration that passes it.
+        max_seconds: wall-time budget of one [`optimize`][optim.optimize.optimize] call, s (None: none). The
+            steady-state objective: every phase (the way in, each step, the regime guard's and the line
+            search's trial points, compiling a gradient program) checks it before its next solve or
+            compilation ([`optim.budget.Budget`][]), so the run overshoots it by at most one solve and
+            returns the best design so far; a windowed objective stops after the iteration that passes it.
         guard: optional regime guard ([`optim.steady.RegimeGuard`][]): a step to a design it refuses is halved until
             accepted (at most ``guard.max_halvings`` times, then the iterate is held); for ``ProjectedLBFGS`` a
             refused trial point fails the Armijo test (within the line search's own budget).
@@ -106,6 +111,16 @@ def default_settings(problem: AbstractProblem) -> Settings:
     if isinstance(problem.objective, Steady):
         return Settings(optimizer=adam(STEADY_LEARNING_RATE), guard=RegimeGuard())
     return Settings()
+
+
+def steady_evaluator(problem: AbstractProblem, settings: Settings) -> SteadyEvaluator:
+    """A [`SteadyEvaluator`][optim.steady.SteadyEvaluator] of ``problem`` whose budget is ``settings.max_seconds``
+    from now (None: none): pass it to [`optim.way_in.periodic_start`][] and then to
+    [`optimize`][optim.optimize.optimize], so the way in and the run share one budget."""
+    evaluator = SteadyEvaluator(problem)
+    if settings.max_seconds is not None:
+        evaluator.budget = Budget(settings.max_seconds)
+    return evaluator
 
 
 @functools.lru_cache(maxsize=8)
@@ -216,8 +231,11 @@ def optimize(
     degrees), ``final`` (the best SI design of the history), ``final_objective`` (its objective, degrees),
     ``last`` (the last iterate, SI) and ``seconds`` (wall time, s: ``start``, the start's evaluation, and
     ``iterations``, the iterations of this call; steady-state objective: ``gradient_compile``, the part of
-    both spent compiling gradient programs), and ``start_search`` when the run looked for a periodic start
-    ([`optim.way_in.StartSearch.describe`][]; its classification time in ``seconds["start_search"]``).
+    both spent compiling gradient programs, and ``first_gradient``, from the evaluator's making (before
+    the way in, where it ran) to its first exact gradient, None where there was none), and
+    ``start_search`` when the run looked for a start ([`optim.way_in.StartSearch.describe`][]; its
+    classification time in ``seconds["start_search"]``). A run whose budget was spent before its
+    first iteration finished has no history: its start is ``final``.
     """
     found = None
     if settings is None:
@@ -235,13 +253,18 @@ def optimize(
         evaluator = SteadyEvaluator(problem) if evaluator is None else evaluator
         compiled_before = evaluator.compile_seconds
         vg, extended = _steady_programs(problem, evaluator), None
+        owned = evaluator.budget is None and settings.max_seconds is not None  # else the caller's (way in included)
+        if owned:
+            evaluator.budget = Budget(settings.max_seconds)
+        budget = evaluator.budget
     else:
         if settings.guard is not None:
             raise ParameterError(
                 "Settings.guard (the regime guard) needs the steady-state objective (optim.steady.Steady)"
             )
-        evaluator, compiled_before = None, 0.0
+        evaluator, compiled_before, owned = None, 0.0, False
         vg, extended = programs(dataclasses.replace(problem, start=None), penalty)
+        budget = None if settings.max_seconds is None else Budget(settings.max_seconds)
     ckpt = None if out is None else Path(out) / "checkpoint.npz"
     if resume:
         if ckpt is None or not ckpt.exists():
@@ -266,7 +289,12 @@ def optimize(
         start_tic = time.perf_counter()
         u = problem.start_unit()
         # the objective at the start (degrees) scales the rest; its evaluation is iteration 0's
-        first = _checked(problem, u, *vg(u, 1.0))
+        try:
+            first = _checked(problem, u, *vg(u, 1.0))
+        except BudgetSpent as err:  # the way in spent the budget: the start is the result
+            if owned:
+                evaluator.budget = None
+            return _spent_at_start(problem, evaluator, u, str(err), found)
         f0 = float(first[0])
         first = (first[0] / f0, first[1] / f0)
         state, history, quiet, converged, stop = opt.init(u), [], 0, None, None
@@ -281,31 +309,35 @@ def optimize(
     bar = tqdm(total=settings.max_iterations, initial=start_it, desc=opt.label, unit="it", disable=not progress)
     while converged is None and stop is None and len(history) < settings.max_iterations:
         tic = time.perf_counter()
-        if carried is not None:
-            value, grad = carried
-        else:
-            value, grad = _checked(problem, u, *vg(u, f0))
-            evaluations += not search  # a line-search optimiser's resume re-evaluates its iterate: not counted
-        carried, halvings = None, 0
-        x = problem.from_unit(u)
-        proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
-        regime = evaluator.last_report if evaluator is not None else {}
-        previous = history[-1]["objective_deg"] / f0 if search and history else None
-        changed = qn.value_change_converged(previous, float(value), opt.ftol) if previous is not None else None
-        if regime.get("regime") == NOT_PERIODIC and not np.any(np.asarray(grad)):
-            stop, u_new = not_periodic_reason(problem, x), u
-        elif search and (proj_step < settings.gtol or changed):
-            u_new = u  # converged (below): no line search
-        elif search:
-            res = opt.step(trial, problem.feasible_set(), np.asarray(u), float(value), np.asarray(grad), state)
-            u_new, state, halvings = jnp.asarray(res.u), res.state, res.trials - int(res.ok)
-            evaluations += res.evaluations
-            carried = (res.value, res.grad) if res.ok else None
-            stop = None if res.ok else qn.failure_reason(res)
-        else:
-            updates, state = opt.update(grad, state, u, value, f0, extended)
-            u_new = problem.project(optax.apply_updates(u, updates))
-            u_new, halvings = _guarded(problem, settings.guard, evaluator, u, u_new)
+        try:
+            if carried is not None:
+                value, grad = carried
+            else:
+                value, grad = _checked(problem, u, *vg(u, f0))
+                evaluations += not search  # a line-search optimiser's resume re-evaluates its iterate: not counted
+            carried, halvings = None, 0
+            x = problem.from_unit(u)
+            proj_step = float(jnp.max(jnp.abs(problem.project(u - grad) - u)))
+            regime = evaluator.last_report if evaluator is not None else {}
+            previous = history[-1]["objective_deg"] / f0 if search and history else None
+            changed = qn.value_change_converged(previous, float(value), opt.ftol) if previous is not None else None
+            if regime.get("regime") == NOT_PERIODIC and not np.any(np.asarray(grad)):
+                stop, u_new = not_periodic_reason(problem, x), u
+            elif search and (proj_step < settings.gtol or changed):
+                u_new = u  # converged (below): no line search
+            elif search:
+                res = opt.step(trial, problem.feasible_set(), np.asarray(u), float(value), np.asarray(grad), state)
+                u_new, state, halvings = jnp.asarray(res.u), res.state, res.trials - int(res.ok)
+                evaluations += res.evaluations
+                carried = (res.value, res.grad) if res.ok else None
+                stop = None if res.ok else qn.failure_reason(res)
+            else:
+                updates, state = opt.update(grad, state, u, value, f0, extended)
+                u_new = problem.project(optax.apply_updates(u, updates))
+                u_new, halvings = _guarded(problem, settings.guard, evaluator, u, u_new)
+        except BudgetSpent as err:  # the iterate so far is kept; this iteration's step is not taken
+            interrupted = str(err)
+            break
         step = float(jnp.max(jnp.abs(u_new - u)))
         cost = float(problem.cost(x))
         grad_si = np.asarray(grad) * f0 / np.asarray(problem.span)
@@ -344,10 +376,14 @@ def optimize(
         if stop_after is not None and done_here >= stop_after:
             interrupted = f"stopped after {done_here} iterations of this call (stop_after)"
             break
-        if settings.max_seconds is not None and time.perf_counter() - started > settings.max_seconds:
-            interrupted = f"time limit: max_seconds = {settings.max_seconds:g}"
+        if budget is not None and budget.spent():
+            interrupted = f"time limit: max_seconds = {budget.seconds:g}"
             break
     bar.close()
+    if owned:
+        evaluator.budget = None
+    if not history:  # the budget was spent before the first iteration finished
+        return _spent_at_start(problem, evaluator, u, interrupted, found, f0)
     best = min(history, key=lambda h: h["objective_deg"])
     limit = f"iteration limit: max_iterations = {settings.max_iterations}"
     return {
@@ -359,12 +395,32 @@ def optimize(
         "final": [best[f"{n}_SI"] for n in problem.names],
         "final_objective": best["objective_deg"],
         "last": [history[-1][f"{n}_SI"] for n in problem.names],
-        "seconds": {
-            "start": start_seconds,
-            "iterations": time.perf_counter() - started,
-            **({"gradient_compile": evaluator.compile_seconds - compiled_before} if evaluator is not None else {}),
-            **({"start_search": found.seconds} if found is not None else {}),
-        },
+        **_phases(start_seconds, time.perf_counter() - started, evaluator, compiled_before, found),
+    }
+
+
+def _spent_at_start(problem: AbstractProblem, evaluator, u, reason: str, found, f0=None) -> dict:
+    """The result of a run whose budget was spent before its first iteration: no history, the
+    start as the final design with its value where it was classified (else NaN)."""
+    x = np.asarray(problem.from_unit(u), dtype=float).tolist()
+    seen = found.classified[found.chosen]["value_deg"] if found is not None and found.classified else f0
+    if seen is None and evaluator is not None:
+        try:  # the start's steady state is kept from the way in: no new solve
+            seen = evaluator.value(np.asarray(x))[0]
+        except BudgetSpent:
+            pass
+    value = math.nan if seen is None else seen
+    return {"history": [], "converged": None, "stop_reason": reason, "evaluations": 0, "f0": value, "final": x,
+            "final_objective": value, "last": x, **_phases(0.0, 0.0, evaluator, 0.0, found)}  # fmt: skip
+
+
+def _phases(start: float, iterations: float, evaluator, compiled_before: float, found) -> dict:
+    """The result's ``seconds`` (by phase) and ``start_search``."""
+    steady = {} if evaluator is None else {"gradient_compile": evaluator.compile_seconds - compiled_before}
+    steady.update({} if evaluator is None else {"first_gradient": evaluator.first_gradient})
+    search = {} if found is None else {"start_search": found.seconds}
+    return {
+        "seconds": {"start": start, "iterations": iterations, **steady, **search},
         **({"start_search": found.describe()} if found is not None else {}),
     }
 

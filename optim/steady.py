@@ -47,8 +47,10 @@ from jaxcrank.physics.signals import metric_definitions, rms_metrics
 from .ensemble import Ensemble
 from .objective import AbstractObjective, options_fields, value_and_grad
 
-#: the steady-state objective's default settings: periods up to 2 revolutions, 720 samples per revolution
-STEADY_OBJECTIVE = SteadyOptions(max_period=2, samples_per_revolution=720)
+#: the steady-state objective's default settings: periods up to 2 revolutions, 720 samples per
+#: revolution; where Newton shooting fails, the design's value is its long-run statistics (labelled
+#: not periodic), never NaN
+STEADY_OBJECTIVE = SteadyOptions(max_period=2, samples_per_revolution=720, statistics_on_failure=True)
 #: the regimes, as [`jaxcrank.steady_state`][jaxcrank.numerics.steady.steady_state] names them
 PERIODIC, NOT_PERIODIC, FAILED = Regime.PERIODIC, Regime.NOT_PERIODIC, Regime.FAILED
 
@@ -151,7 +153,8 @@ def report(steady: S.SteadyState) -> dict:
     ``leading_multiplier`` (the largest |Floquet multiplier|, per period),
     ``lyapunov_exponent_per_s``, ``ok`` and, not periodic, ``statistics`` (metric ->
     value and 95 % confidence interval, units in the names) and
-    ``gradient = "trend estimate"``."""
+    ``gradient = "trend estimate"``; ``note`` where shooting failed and the statistics stand in
+    ([`jaxcrank.SteadyOptions`][jaxcrank.numerics.shooting.SteadyOptions] ``statistics_on_failure``)."""
     moduli = steady.multiplier_moduli
     out = {
         "ok": steady.ok,
@@ -164,6 +167,8 @@ def report(steady: S.SteadyState) -> dict:
     if steady.statistics is not None:
         out["statistics"] = {k: {q: float(v) for q, v in s.items()} for k, s in steady.statistics.items()}
         out["gradient"] = "trend estimate"
+    if steady.note:
+        out["note"] = steady.note
     return out
 
 
@@ -171,9 +176,39 @@ def report(steady: S.SteadyState) -> dict:
 _PROGRAMS: dict = {}
 
 
+#: compilations started by `SteadyEvaluator.prepare`: key -> future of (program, seconds)
+_PENDING: dict = {}
+_COMPILER = []
+
+
+def _compiler():
+    """The one background thread that compiles prepared programs."""
+    if not _COMPILER:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _COMPILER.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxcrank-compile"))
+    return _COMPILER[0]
+
+
+def _compile(fun, args, key):
+    """``fun`` jitted, lowered and compiled for ``args``, and the wall time that took, s. With the
+    compilation cache on ([`jaxcrank.runs.cache`][]), its trace is stored under ``key`` (checks as
+    NaN: no host callback) and its executable in JAX's cache, so a later process loads both."""
+    from jaxcrank.runs import cache
+
+    tic = time.perf_counter()
+    jitted = jax.jit(fun) if cache.folder() is None else cache.exported(fun, ("steady gradient", key), *args)
+    program = jitted.lower(*args).compile()
+    return program, time.perf_counter() - tic
+
+
 def forget_programs() -> None:
-    """Drop every compiled value-and-gradient program of the steady-state objective, so the next
-    evaluation compiles its own (benchmarks that count compilation in each method's time)."""
+    """Drop every compiled value-and-gradient program of the steady-state objective (and wait for
+    any being compiled), so the next evaluation compiles its own (benchmarks that count
+    compilation in each method's time)."""
+    for pending in _PENDING.values():
+        pending.result()
+    _PENDING.clear()
     _PROGRAMS.clear()
 
 
@@ -220,6 +255,9 @@ class SteadyEvaluator:
         self._trend = None
         self.last_report = {}  # report() of the last evaluated design
         self.compile_seconds = 0.0  # wall time this evaluator spent compiling gradient programs, s
+        self.budget = None  # a Budget checked before every new solve and compilation (None: none)
+        self.made = time.perf_counter()
+        self.first_gradient = None  # wall time from the evaluator's making to its first exact gradient, s
 
     def steady_at(self, x) -> S.SteadyState:
         """The steady state at SI design ``x`` (cached for the last few designs), warm-started
@@ -230,6 +268,8 @@ class SteadyEvaluator:
         if self._kept is not None and key == self._kept[0]:
             return self._kept[1]
         if key not in self._steady:
+            if self.budget is not None:
+                self.budget.check("a steady-state solve")
             mech = self.problem.mechanism(jnp.asarray(key))
             steady = warm_solve(
                 lambda warm: self.objective.solve(mech, warm_start=warm),
@@ -259,41 +299,74 @@ class SteadyEvaluator:
         return float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x))), info
 
     def warm_from(self, x) -> None:
-        """Make the steady state at SI design ``x`` the next warm start, where it is periodic, and
-        keep it beyond the cache of the last few designs until another design is kept: a later
-        ``warm_from(x)`` or evaluation at ``x`` finds it without a solve. ``x`` is solved
+        """Keep the steady state at SI design ``x`` beyond the cache of the last few designs until
+        another design is kept: a later ``warm_from(x)`` or evaluation at ``x`` finds it without a
+        solve; where it is periodic, it is also the next warm start. ``x`` is solved
         (warm-started from the last periodic steady state) only when it is neither kept nor cached."""
         steady = self.steady_at(x)
         if steady.periodic:
             self.last = steady
-            self._kept = (_key(x), steady)
+        self._kept = (_key(x), steady)
 
     def regime_at(self, x) -> Regime:
         """The [`Regime`][jaxcrank.numerics.results.Regime] at SI design ``x`` (``FAILED`` when the solve failed)."""
         steady = self.steady_at(x)
         return steady.regime if steady.ok else FAILED
 
-    def _program(self, steady: S.SteadyState, args):
-        """The compiled value and gradient for the orbits of ``steady``'s period and
-        dynamic subspace, taking ``args`` = (the design, the orbit's section state, its
-        monodromy): one program serves every design of a regime, and every evaluator of the
-        same problem (its start aside: multistart runs share it). Compiled at its first use,
-        timed into ``compile_seconds``."""
+    def _program_spec(self, steady: S.SteadyState):
+        """``(key, fun)``: the store key of the value-and-gradient program for the orbits of
+        ``steady``'s period and dynamic subspace, and the function it compiles, of (the design,
+        the orbit's section state, its monodromy)."""
         key = (dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
+        problem, objective, template = key[0], self.objective, _light(steady)
+
+        def f(x, section_state, monodromy):
+            light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
+            rms = objective.rms_at(problem.mechanism(x), light)
+            return problem.loss(rms) + problem.cost(x)
+
+        return key, value_and_grad(f, True)
+
+    def _program(self, steady: S.SteadyState, args):
+        """The compiled program of [`_program_spec`][optim.steady.SteadyEvaluator._program_spec] for
+        ``args`` = (the design, the orbit's section state, its monodromy): one program serves every
+        design of a regime, and every evaluator of the same problem (its start aside: multistart runs
+        share it). Compiled at its first use (the budget checked first), or taken from a compilation
+        [`prepare`][optim.steady.SteadyEvaluator.prepare] started; timed into ``compile_seconds``."""
+        key, fun = self._program_spec(steady)
         if key not in _PROGRAMS:
-            problem, objective, template = key[0], self.objective, _light(steady)
-
-            def f(x, section_state, monodromy):
-                light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
-                rms = objective.rms_at(problem.mechanism(x), light)
-                return problem.loss(rms) + problem.cost(x)
-
+            pending = _PENDING.pop(key, None)
+            if pending is None:
+                if self.budget is not None:
+                    self.budget.check("compiling the gradient program")
+                program, seconds = _compile(fun, args, key)
+            else:
+                program, seconds = pending.result()
+            self.compile_seconds += seconds
             if len(_PROGRAMS) >= 8:
                 _PROGRAMS.pop(next(iter(_PROGRAMS)))
-            tic = time.perf_counter()
-            _PROGRAMS[key] = jax.jit(value_and_grad(f, True)).lower(*args).compile()
-            self.compile_seconds += time.perf_counter() - tic
+            _PROGRAMS[key] = program
         return _PROGRAMS[key]
+
+    def prepare(self, x) -> bool:
+        """Start compiling, in a background thread, the gradient program the periodic steady state at
+        SI design ``x`` (cached: no new solve) will need, while the caller goes on (the way in
+        classifying further candidates). Returns whether a compilation was started (False: ``x``
+        is not periodic or not solved yet, or its program is compiled or being compiled)."""
+        steady = self._kept[1] if self._kept is not None and self._kept[0] == _key(x) else self._steady.get(_key(x))
+        if steady is None or not steady.periodic:
+            return False
+        key, fun = self._program_spec(steady)
+        if key in _PROGRAMS or key in _PENDING:
+            return False
+        args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
+        _PENDING[key] = _compiler().submit(_compile, fun, args, key)
+        return True
+
+    def _gradient_done(self) -> None:
+        """Record the time to the first gradient (``first_gradient``, s since the evaluator was made)."""
+        if self.first_gradient is None:
+            self.first_gradient = time.perf_counter() - self.made
 
     def value_and_grad(self, x) -> tuple[float, np.ndarray, dict]:
         """``(value, gradient, regime)`` at SI design ``x``: the objective in degrees, its
@@ -307,6 +380,7 @@ class SteadyEvaluator:
         if steady.periodic:
             args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
             value, grad = self._program(steady, args)(*args)
+            self._gradient_done()
             return float(value), np.asarray(grad), info
         rms = {k: jnp.asarray(float(steady.statistics[k]["value"])) for k in rms_metrics(self.problem.base)}
         value = float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x)))

@@ -12,7 +12,14 @@ jax.config.update("jax_enable_x64", True)
 # exception: the tests that run optax's optimisers, whose own update (adam's bias
 # correction) mixes its int32 step count with Python floats, which strict promotion
 # refuses (optax 0.2.x); they keep JAX's standard promotion.
-STANDARD_PROMOTION = ("test_optimize.py", "test_design.py", "test_roundtrip.py", "test_starts.py", "test_optimizers.py")
+STANDARD_PROMOTION = (
+    "test_optimize.py",
+    "test_design.py",
+    "test_roundtrip.py",
+    "test_starts.py",
+    "test_optimizers.py",
+    "test_budget.py",
+)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 
 import jaxcrank  # noqa: E402,F401

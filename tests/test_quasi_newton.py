@@ -176,18 +176,36 @@ class _Evaluator:
     def __init__(self, problem, periodic=lambda u: u[2] < 0.6):
         self.problem, self.periodic, self.evaluated, self.asked = problem, periodic, [], []
         self.last_report, self.compile_seconds, self.classified, self.warmed = {}, 0.0, [], []
+        self.budget, self.first_gradient, self.solved = None, None, []
 
     def unit(self, x):
         return np.asarray(self.problem.to_unit(jnp.asarray(x)))
 
+    def _solve(self, x):
+        """A new design is solved (recorded in ``solved``) after the budget is checked, as the
+        steady-state evaluator does; a design solved before is not solved again."""
+        u = self.unit(x)
+        if not any(np.array_equal(u, v) for v in self.solved):
+            if self.budget is not None:
+                self.budget.check("a steady-state solve")
+            self.solved.append(u)
+        return u
+
+    def prepare(self, x):
+        return False
+
     def regime_at(self, x):
-        self.asked.append(self.unit(x))
+        self.asked.append(self._solve(x))
         return PERIODIC if self.periodic(self.unit(x)) else NOT_PERIODIC
 
-    def value_and_grad(self, x):
-        u = self.unit(x)
-        self.evaluated.append(u)
+    def value_and_grad(self, x, gradient=True):
+        u = self._solve(x)
         periodic = self.periodic(u)
+        if gradient and periodic and not self.compile_seconds:  # the first gradient compiles: checked
+            if self.budget is not None:
+                self.budget.check("compiling the gradient program")
+            self.compile_seconds = 1e-9
+        self.evaluated.append(u)
         self.last_report = {"regime": PERIODIC if periodic else NOT_PERIODIC, "leading_multiplier": 0.5}
         grad_u = self.D * (u - self.c) if periodic else np.zeros(3)
         value = 1.0 + 0.5 * float((u - self.c) @ (self.D * (u - self.c)))
@@ -196,7 +214,7 @@ class _Evaluator:
     def value(self, x):
         """The value and regime without a gradient, as a classification of a start."""
         self.classified.append(self.unit(x))
-        value, _, report = self.value_and_grad(x)
+        value, _, report = self.value_and_grad(x, gradient=False)
         self.evaluated.pop()
         return value, {**report, "ok": True}
 

@@ -14,6 +14,7 @@ from optim.optimize import Settings, optimize
 from optim.optimizers import ProjectedLBFGS
 from optim.starts import periodic_start, start_points
 from optim.steady import NOT_PERIODIC, PERIODIC, RegimeGuard
+from optim.way_in import LOCAL_STARTS
 from tests.test_quasi_newton import _Evaluator, _patch, steady_problem
 
 
@@ -63,17 +64,59 @@ def test_a_periodic_candidate_above_a_value_already_seen_is_passed_over():
     np.testing.assert_allclose(np.asarray(ev.warmed), candidates[[2, 4, 5, 5]], atol=1e-9)
 
 
-def test_with_no_candidate_stopping_the_search_the_lowest_periodic_one_is_chosen_and_warm_starts():
-    """Only candidate 2 (6.32) is periodic among 5 and lies above the 3.62 of candidate 1: every
-    candidate is classified, 2 is chosen, and the evaluator, which kept its orbit when it was
-    classified, is told to warm-start from it at the end."""
+def test_a_periodic_candidate_worse_than_a_value_seen_is_not_the_start():
+    """Only candidate 2 (6.32) is periodic among 5 and lies above the 3.62 of candidate 1 (not
+    periodic): the search classifies LOCAL_STARTS candidates around the lowest value seen (none is
+    periodic here), and the start is the lowest value seen, not periodic; candidate 2 is not chosen."""
     prob = _start(steady_problem(), [0.1, 0.1, 0.9])
-    chosen = start_points(prob, 5, seed=1)[2]
-    ev = _Evaluator(prob, periodic=lambda u: bool(np.allclose(u, chosen, atol=1e-9)))
+    periodic_one = start_points(prob, 5, seed=1)[2]
+    ev = _Evaluator(prob, periodic=lambda u: bool(np.allclose(u, periodic_one, atol=1e-9)))
     found = periodic_start(prob, count=5, seed=1, evaluator=ev, progress=False)
-    assert found.periodic and found.chosen == 2 and len(found.classified) == 5
-    np.testing.assert_allclose(np.asarray(found.problem.start_unit()), chosen, atol=1e-12)
-    np.testing.assert_allclose(np.asarray(ev.warmed), [chosen, chosen], atol=1e-9)
+    phases = [c["phase"] for c in found.classified]
+    assert phases == ["start"] + ["sobol"] * 4 + ["local"] * LOCAL_STARTS
+    values = [c["value_deg"] for c in found.classified]
+    assert not found.periodic and found.chosen != 2 and values[found.chosen] == min(values) < values[2]
+    np.testing.assert_allclose(
+        np.asarray(found.problem.start_unit()), found.classified[found.chosen]["unit_design"], atol=1e-12
+    )
+    np.testing.assert_allclose(ev.warmed[-1], found.classified[found.chosen]["unit_design"], atol=1e-9)
+
+
+def test_around_a_best_design_that_is_not_periodic_a_periodic_neighbour_no_worse_is_the_start():
+    """No Sobol candidate is periodic; the local candidates around the lowest value seen are
+    (the stand-in's region u_2 < 0.6 moved: periodic wherever the design is not a Sobol candidate).
+    The first local candidate that is periodic and the lowest so far is the start."""
+    prob = _start(steady_problem(), [0.1, 0.1, 0.9])
+    sobol = start_points(prob, 8, seed=2)
+    ev = _Evaluator(prob, periodic=lambda u: not any(np.allclose(u, c, atol=1e-12) for c in sobol))
+    found = periodic_start(prob, count=8, seed=2, evaluator=ev, progress=False, local=40)
+    values = [c["value_deg"] for c in found.classified]
+    assert found.periodic and found.classified[found.chosen]["phase"] == "local"
+    assert found.chosen == len(found.classified) - 1 and values[found.chosen] == min(values)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_start_is_never_a_periodic_design_worse_than_a_value_seen(seed):
+    """Random regime maps, values and failed solves: the chosen start has the lowest value classified,
+    a failed candidate (no value) is never chosen, and ``periodic`` says the chosen design's regime."""
+    rng = np.random.default_rng(seed)
+    prob = _start(steady_problem(), rng.uniform(0.0, 1.0, 3) * [0.5, 0.5, 1.0])
+    bits = rng.integers(0, 2**16)
+
+    def regime(u):  # a pseudo-random map of the box into regimes
+        return int(np.floor(np.sum(u * [7.0, 11.0, 13.0])) + bits) % 3  # 0 periodic, 1 not, 2 failed
+
+    ev = _Evaluator(prob, periodic=lambda u: regime(u) == 0)
+    value = ev.value
+    ev.value = lambda x: (math.nan, value(x)[1]) if regime(ev.unit(x)) == 2 else value(x)
+    found = periodic_start(prob, count=6, seed=seed, evaluator=ev, progress=False)
+    values = [c["value_deg"] for c in found.classified if c["value_deg"] is not None]
+    if values:
+        chosen = found.classified[found.chosen]
+        assert chosen["value_deg"] == min(values)
+        assert found.periodic == (chosen["regime"] == PERIODIC)
+    else:
+        assert not found.periodic and found.problem is prob
 
 
 def test_a_periodic_candidate_without_a_finite_value_is_never_chosen():
@@ -89,19 +132,21 @@ def test_a_periodic_candidate_without_a_finite_value_is_never_chosen():
     assert found.classified[1]["regime"] == PERIODIC and found.classified[1]["value_deg"] is None
 
 
-def test_no_periodic_candidate_keeps_the_start_and_the_run_from_it_is_not_converged(monkeypatch):
-    """Nothing in the box is periodic: every candidate is classified, the start is kept, and
-    the optimiser run from it (with the search's evaluator: no new one is made) stops at once,
-    not converged, saying why."""
+def test_no_periodic_candidate_starts_from_the_lowest_value_and_the_run_from_it_is_not_converged(monkeypatch):
+    """Nothing in the box is periodic: every candidate is classified (and LOCAL_STARTS around the
+    lowest), the start is the lowest value seen, and the optimiser run from it (with the search's
+    evaluator: no new one is made) stops at once, not converged, saying why."""
     made = _patch(monkeypatch, periodic=lambda u: False)
     prob = steady_problem()
     ev = _Evaluator(prob, periodic=lambda u: False)
     found = periodic_start(prob, count=4, evaluator=ev, progress=False)
-    assert not found.periodic and found.chosen == 0 and len(found.classified) == 4
-    assert found.problem is prob
+    values = [c["value_deg"] for c in found.classified]
+    assert not found.periodic and len(found.classified) == 4 + LOCAL_STARTS
+    assert values[found.chosen] == min(values)
     res = optimize(found.problem, Settings(optimizer=ProjectedLBFGS()), progress=False, evaluator=found.evaluator)
     assert not made  # the search's evaluator was used
     assert res["converged"] is None and res["stop_reason"].startswith("not periodic at")
+    assert res["final_objective"] == pytest.approx(values[found.chosen], rel=1e-12)
 
 
 def test_the_optimiser_continues_from_the_chosen_start_with_the_carried_evaluator(monkeypatch):
@@ -120,7 +165,7 @@ def test_the_optimiser_continues_from_the_chosen_start_with_the_carried_evaluato
     designs = np.asarray(ev.evaluated)
     assert all(ev.periodic(u) for u in designs)
     assert designs.min() >= 0.0 and designs.max() <= 1.0 and np.max(designs[:, 0] + designs[:, 1]) <= 1.25 + 1e-12
-    assert set(res["seconds"]) == {"start", "iterations", "gradient_compile"}
+    assert set(res["seconds"]) == {"start", "iterations", "gradient_compile", "first_gradient"}
 
 
 def test_count_below_one_is_refused():
