@@ -190,15 +190,10 @@ def _compiler():
     return _COMPILER[0]
 
 
-def _compile(fun, args, key):
-    """``fun`` jitted, lowered and compiled for ``args``, and the wall time that took, s. With the
-    compilation cache on ([`jaxcrank.runs.cache`][]), its trace is stored under ``key`` (checks as
-    NaN: no host callback) and its executable in JAX's cache, so a later process loads both."""
-    from jaxcrank.runs import cache
-
+def _compile(fun, args):
+    """``fun`` jitted, lowered and compiled for ``args``, and the wall time that took, s."""
     tic = time.perf_counter()
-    jitted = jax.jit(fun) if cache.folder() is None else cache.exported(fun, ("steady gradient", key), *args)
-    program = jitted.lower(*args).compile()
+    program = jax.jit(fun).lower(*args).compile()
     return program, time.perf_counter() - tic
 
 
@@ -339,7 +334,7 @@ class SteadyEvaluator:
             if pending is None:
                 if self.budget is not None:
                     self.budget.check("compiling the gradient program")
-                program, seconds = _compile(fun, args, key)
+                program, seconds = _compile(fun, args)
             else:
                 program, seconds = pending.result()
             self.compile_seconds += seconds
@@ -360,7 +355,7 @@ class SteadyEvaluator:
         if key in _PROGRAMS or key in _PENDING:
             return False
         args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
-        _PENDING[key] = _compiler().submit(_compile, fun, args, key)
+        _PENDING[key] = _compiler().submit(_compile, fun, args)
         return True
 
     def _gradient_done(self) -> None:
