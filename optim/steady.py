@@ -246,7 +246,8 @@ class SteadyEvaluator:
         self.objective = self.problem.objective
         self.last = None  # the last periodic steady state: the next warm start
         self._steady = {}
-        self._kept = None  # (design key, steady state) kept by warm_from beyond the cache
+        self._kept = None  # (design key, steady state) of the last periodic design kept by warm_from
+        self._held = None  # the same for the last design kept that is not periodic
         self._trend = None
         self.last_report = {}  # report() of the last evaluated design
         self.compile_seconds = 0.0  # wall time this evaluator spent compiling gradient programs, s
@@ -260,8 +261,9 @@ class SteadyEvaluator:
         without a full settle (its shooting from the carried-over state met an unstable
         orbit) is classified again from rest: the regime is the motion's from rest."""
         key = _key(x)
-        if self._kept is not None and key == self._kept[0]:
-            return self._kept[1]
+        for kept in (self._kept, self._held):
+            if kept is not None and key == kept[0]:
+                return kept[1]
         if key not in self._steady:
             if self.budget is not None:
                 self.budget.check("a steady-state solve")
@@ -294,14 +296,18 @@ class SteadyEvaluator:
         return float(self.problem.loss(rms) + self.problem.cost(jnp.asarray(x))), info
 
     def warm_from(self, x) -> None:
-        """Keep the steady state at SI design ``x`` beyond the cache of the last few designs until
-        another design is kept: a later ``warm_from(x)`` or evaluation at ``x`` finds it without a
-        solve; where it is periodic, it is also the next warm start. ``x`` is solved
-        (warm-started from the last periodic steady state) only when it is neither kept nor cached."""
+        """Keep the steady state at SI design ``x`` beyond the cache of the last few designs, until
+        another design of its kind is kept: a later ``warm_from(x)`` or evaluation at ``x`` finds it
+        without a solve. A periodic one is also the next warm start; one that is not periodic (the
+        way in's start where the lowest value is not periodic) is held in a slot of its own and
+        changes no warm start. ``x`` is solved (warm-started from the last periodic steady state)
+        only when it is neither kept nor cached."""
         steady = self.steady_at(x)
         if steady.periodic:
             self.last = steady
-        self._kept = (_key(x), steady)
+            self._kept = (_key(x), steady)
+        else:
+            self._held = (_key(x), steady)
 
     def regime_at(self, x) -> Regime:
         """The [`Regime`][jaxcrank.numerics.results.Regime] at SI design ``x`` (``FAILED`` when the solve failed)."""
@@ -348,7 +354,8 @@ class SteadyEvaluator:
         SI design ``x`` (cached: no new solve) will need, while the caller goes on (the way in
         classifying further candidates). Returns whether a compilation was started (False: ``x``
         is not periodic or not solved yet, or its program is compiled or being compiled)."""
-        steady = self._kept[1] if self._kept is not None and self._kept[0] == _key(x) else self._steady.get(_key(x))
+        kept = self._kept is not None and self._kept[0] == _key(x)
+        steady = self._kept[1] if kept else self._steady.get(_key(x))
         if steady is None or not steady.periodic:
             return False
         key, fun = self._program_spec(steady)
