@@ -100,6 +100,16 @@ CHECKPOINTS = (1 / 32, 1 / 16, 1 / 8, 3 / 16, 1 / 4, 3 / 8, 1 / 2, 3 / 4, 1.0)
 #: be bounded further out
 EXTENSIONS = (1.5, 2.0, 2.5, 3.0, 4.0, 5.0)
 CLASSIFY = 8  # ours: candidate starts classified at most
+#: the way in of the parts that do not record theirs
+EARLIER_WAY_IN = (
+    "earlier: the first periodic candidate that is the lowest so far, else the lowest periodic one; a failed "
+    "solve had no value and set no bar; the budget checked only in value and gradient calls"
+)
+#: the way in the parts of this version run (recorded in each part; parts without it ran the earlier one)
+WAY_IN = (
+    "by value: every design has a value (the long-run statistics where shooting fails), the start is the lowest "
+    "value classified, 4 candidates around it where that one is not periodic; budgets checked in every phase"
+)
 LEARNING_RATE = 0.05  # ours_adam: Adam step, scaled design units
 GRADIENT_FREE = ("cma", "tpe")
 OURS = ("ours_adam", "ours_lbfgs")
@@ -396,6 +406,7 @@ def run_part(name: str, seed: int, budget: float, methods, path: Path, update: b
         "start_regime": start_info["regime"],
         "start_heldout_deg": start_heldout,
         "compile_s": compile_s,
+        "way_in": WAY_IN,
         "heldout_s": time.perf_counter() - t,
         "heldout_designs": len(scored),
         "methods": out,
@@ -455,6 +466,8 @@ def merge(parts_dir: Path, out: Path) -> dict:
                     "gradient_free_budgets_cpu_s": {k: b for k, (_, b) in zip(ran, free)},
                     "speedup": speedup,
                     "speedup_is_lower_bound": p["speedup_lower_bound"] is not None,
+                    "ours_first_gradient_cpu_s": p["methods"].get(DEFAULT, {}).get("first_gradient_cpu_s"),
+                    "ours_start": p["methods"].get(DEFAULT, {}).get("start_search", {}).get("chosen"),
                 }
             )
         problems.append(
@@ -466,6 +479,7 @@ def merge(parts_dir: Path, out: Path) -> dict:
                 "names": mine[0]["names"],
                 "best_heldout_any_method": best,
                 "target_heldout_deg": target,
+                "way_in": mine[0].get("way_in", EARLIER_WAY_IN),
                 "runs": mine,
             }
         )

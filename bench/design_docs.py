@@ -398,8 +398,8 @@ def _methods(d, methods) -> str:
     """The methods of the head-to-head in words."""
     words = {
         "ours_adam": "ours, the library's way in and its default optimiser: the start and then scrambled Sobol "
-        f"points are classified until one is periodic with the lowest value so far (at most {d['classify_at_most']}, "
-        "else the lowest periodic one: `optim.way_in.periodic_start`), then projected Adam "
+        f"points are classified until one is periodic with the lowest value so far (at most {d['classify_at_most']}: "
+        "`optim.way_in.periodic_start`; the two versions the parts ran are below), then projected Adam "
         f"(step {d['learning_rate_adam']:g} in scaled units) "
         "on the exact steady-state gradient with the regime guard, the classification's orbit carried in",
         "ours_lbfgs": "ours with L-BFGS: the same with projected L-BFGS",

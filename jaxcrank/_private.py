@@ -50,6 +50,21 @@ def equinox_checks_as_nan():
         _errors.EQX_ON_ERROR = before
 
 
+def equinox_checks_as_nan_from_now() -> None:
+    """``equinox.error_if`` checks traced from now on in this process return NaN (the module
+    setting of [`equinox_checks_as_nan`][jaxcrank._private.equinox_checks_as_nan], not restored)."""
+    from equinox import _errors
+
+    _errors.EQX_ON_ERROR = "nan"
+
+
+def equinox_checking_as_nan() -> bool:
+    """Whether ``equinox.error_if`` checks traced now return NaN."""
+    from equinox import _errors
+
+    return _errors.EQX_ON_ERROR == "nan"
+
+
 def is_stepsize_controller_tolerance(value) -> bool:
     """Whether ``value`` (a root finder's ``rtol``, ``atol`` or ``norm``) is diffrax's
     placeholder "take it from the step-size controller"

@@ -329,6 +329,8 @@ def run_problem(args, problem: Problem, settings: Settings, name: str) -> int:
     if not args.no_cache:
         try:
             cache.enable(args.cache_dir)
+            if isinstance(problem.objective, Steady):  # its solves check results on the host: cacheable programs
+                cache.checks_as_nan_from_now()
         except OSError as err:  # the run goes on, compiling as without a cache
             print(
                 f"jaxcrank optimize: no compilation cache ({err}); pass --cache-dir DIR or --no-cache", file=sys.stderr

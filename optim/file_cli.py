@@ -106,12 +106,14 @@ def run(args) -> int:
 
 
 def _prepare(args, path: Path, out: Path) -> None:
-    """Create the run folder ``out``, turn on the compilation cache (unless ``--no-cache``) and
-    copy the problem file into it as ``problem.toml``."""
+    """Create the run folder ``out``, turn on the compilation cache (unless ``--no-cache``; the
+    steady-state programs traced with equinox's checks as NaN, so the cache keeps them) and copy
+    the problem file into it as ``problem.toml``."""
     out.mkdir(parents=True, exist_ok=True)
     if not args.no_cache:
         try:
             cache.enable(args.cache_dir)
+            cache.checks_as_nan_from_now()
         except OSError as err:
             print(f"jaxcrank optimize: no compilation cache ({err})", file=sys.stderr)
     if path.resolve() != (out / "problem.toml").resolve():

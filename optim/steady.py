@@ -190,10 +190,18 @@ def _compiler():
     return _COMPILER[0]
 
 
-def _compile(fun, args):
-    """``fun`` jitted, lowered and compiled for ``args``, and the wall time that took, s."""
+def _compile(fun, args, key):
+    """``fun`` jitted, lowered and compiled for ``args``, and the wall time that took, s. With the
+    compilation cache on and equinox's checks as NaN for the process
+    ([`jaxcrank.runs.cache.checks_as_nan_from_now`][]: no host callback in the program), its trace is
+    stored under ``key`` ([`jaxcrank.runs.cache.exported`][]) and its executable in JAX's cache, so a
+    later process loads both."""
+    from jaxcrank.runs import cache
+
     tic = time.perf_counter()
-    program = jax.jit(fun).lower(*args).compile()
+    stored = cache.folder() is not None and cache.checking_as_nan()
+    jitted = cache.exported(fun, ("steady gradient", key), *args) if stored else jax.jit(fun)
+    program = jitted.lower(*args).compile()
     return program, time.perf_counter() - tic
 
 
@@ -340,7 +348,7 @@ class SteadyEvaluator:
             if pending is None:
                 if self.budget is not None:
                     self.budget.check("compiling the gradient program")
-                program, seconds = _compile(fun, args)
+                program, seconds = _compile(fun, args, key)
             else:
                 program, seconds = pending.result()
             self.compile_seconds += seconds
@@ -362,7 +370,7 @@ class SteadyEvaluator:
         if key in _PROGRAMS or key in _PENDING:
             return False
         args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
-        _PENDING[key] = _compiler().submit(_compile, fun, args)
+        _PENDING[key] = _compiler().submit(_compile, fun, args, key)
         return True
 
     def _gradient_done(self) -> None:

@@ -120,3 +120,20 @@ def test_an_unwritable_cache_folder_warns_and_the_program_still_runs(tmp_path, m
     np.testing.assert_array_equal(f(np.zeros(2)), np.ones(2))
     with pytest.raises(OSError):
         cache.enable(blocker / "xla")
+
+
+def test_checks_as_nan_from_now_holds_for_the_rest_of_the_process():
+    """In a fresh process: checks raise by default; after ``checks_as_nan_from_now`` every trace
+    (a block of ``checks_as_nan`` included, which restores the process's setting) has them as NaN."""
+    code = (
+        "from jaxcrank.runs import cache\n"
+        "assert not cache.checking_as_nan()\n"
+        "with cache.checks_as_nan():\n"
+        "    assert cache.checking_as_nan()\n"
+        "assert not cache.checking_as_nan()\n"
+        "cache.checks_as_nan_from_now()\n"
+        "with cache.checks_as_nan():\n"
+        "    pass\n"
+        "assert cache.checking_as_nan()\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[1])

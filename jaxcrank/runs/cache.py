@@ -129,6 +129,20 @@ def checks_as_nan():
         yield
 
 
+def checks_as_nan_from_now() -> None:
+    """For the rest of the process, trace equinox's run-time checks as
+    [`checks_as_nan`][jaxcrank.runs.cache.checks_as_nan] does: every program traced from now on
+    has no host callback, so JAX's compilation cache keeps it (a command whose solves all run
+    with ``throw=False`` and check their results on the host: ``jaxcrank optimize`` with the
+    steady-state objective). Programs traced before keep their checks."""
+    _private.equinox_checks_as_nan_from_now()
+
+
+def checking_as_nan() -> bool:
+    """Whether programs traced now have equinox's checks as NaN (no host callback)."""
+    return _private.equinox_checking_as_nan()
+
+
 @functools.cache
 def _environment() -> bytes:
     """What every exported program depends on besides its own key: jaxcrank's and
