@@ -69,8 +69,10 @@ class StartSearch:
             periodic steady state is the chosen start's, so passing it to
             [`optimize`][optim.optimize.optimize] does not solve the start again.
         classified: per candidate, in order: ``unit_design`` (scaled), ``value_deg`` (the
-            objective, degrees; None where the solve failed), ``regime`` and ``seconds``
-            (wall time of its classification, s; the first includes compilation).
+            objective, degrees; None where the solve failed), ``regime``, ``phase`` (``start``,
+            ``sobol`` or ``local``), ``seconds`` (wall time of its classification, s; the first
+            includes compilation) and, where shooting failed and the long-run statistics stand in,
+            ``note``.
         chosen: index of the chosen candidate in ``classified``.
         periodic: whether the chosen design is periodic (False: the lowest value seen is a design
             that is not periodic, or no candidate has a value and the problem's own start is kept).
@@ -170,6 +172,7 @@ def periodic_start(
                 "regime": regime,
                 "phase": phase,
                 "seconds": time.perf_counter() - tic,
+                **({"note": info["note"]} if info.get("note") else {}),
             }
         )
         bar.update(1)
