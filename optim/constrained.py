@@ -164,15 +164,17 @@ class QuantityEvaluator(SteadyEvaluator):
             )
         return self.outputs[key]
 
-    def _program_spec(self, steady):
-        key = ("outputs", structure(self.problem), steady.period_revolutions, steady.active)
+    def _program_key(self, steady):
+        return ("outputs", structure(self.problem), steady.period_revolutions, steady.active)
+
+    def _program_fun(self, steady):
         problem, objective, template = self.problem, self.objective, _light(steady)
 
         def f(x, section_state, monodromy):
             light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
             return problem.outputs(objective.rms_at(problem.mechanism(x), light, every=True), x)
 
-        return key, lambda *a: (f(*a), jax.jacfwd(f)(*a))
+        return lambda *a: (f(*a), jax.jacfwd(f)(*a))
 
     def outputs_and_jacobian(self, x) -> tuple[np.ndarray, np.ndarray, dict]:
         """The outputs at SI design ``x``, their Jacobian (k, n) per SI unit, and the regime

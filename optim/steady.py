@@ -269,24 +269,30 @@ class SteadyEvaluator:
         without a full settle (its shooting from the carried-over state met an unstable
         orbit) is classified again from rest: the regime is the motion's from rest."""
         key = _key(x)
+        known = self._known(key)
+        if known is not None:
+            return known
+        if self.budget is not None:
+            self.budget.check("a steady-state solve")
+        mech = self.problem.mechanism(jnp.asarray(key))
+        steady = warm_solve(
+            lambda warm: self.objective.solve(mech, warm_start=warm),
+            self.last,
+            self.objective.options.settle_revolutions,
+        )
+        if steady.periodic:
+            self.last = steady
+        if len(self._steady) >= 4:
+            self._steady.pop(next(iter(self._steady)))
+        self._steady[key] = steady
+        return steady
+
+    def _known(self, key):
+        """The steady state of design ``key`` kept by ``warm_from`` or cached, else None (no solve)."""
         for kept in (self._kept, self._held):
             if kept is not None and key == kept[0]:
                 return kept[1]
-        if key not in self._steady:
-            if self.budget is not None:
-                self.budget.check("a steady-state solve")
-            mech = self.problem.mechanism(jnp.asarray(key))
-            steady = warm_solve(
-                lambda warm: self.objective.solve(mech, warm_start=warm),
-                self.last,
-                self.objective.options.settle_revolutions,
-            )
-            if steady.periodic:
-                self.last = steady
-            if len(self._steady) >= 4:
-                self._steady.pop(next(iter(self._steady)))
-            self._steady[key] = steady
-        return self._steady[key]
+        return self._steady.get(key)
 
     def value(self, x) -> tuple[float, dict]:
         """``(value, regime)`` at SI design ``x`` without a gradient: the objective in
@@ -322,33 +328,35 @@ class SteadyEvaluator:
         steady = self.steady_at(x)
         return steady.regime if steady.ok else FAILED
 
-    def _program_spec(self, steady: S.SteadyState):
-        """``(key, fun)``: the store key of the value-and-gradient program for the orbits of
-        ``steady``'s period and dynamic subspace, and the function it compiles, of (the design,
-        the orbit's section state, its monodromy)."""
-        key = (dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
-        problem, objective, template = key[0], self.objective, _light(steady)
+    def _program_key(self, steady: S.SteadyState):
+        """The store key of the value-and-gradient program for the orbits of ``steady``'s period and
+        dynamic subspace (the problem without its start: multistart runs share it)."""
+        return (dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
+
+    def _program_fun(self, steady: S.SteadyState):
+        """The function that program compiles, of (the design, the orbit's section state, its monodromy)."""
+        problem, objective, template = dataclasses.replace(self.problem, start=None), self.objective, _light(steady)
 
         def f(x, section_state, monodromy):
             light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
             rms = objective.rms_at(problem.mechanism(x), light)
             return problem.loss(rms) + problem.cost(x)
 
-        return key, value_and_grad(f, True)
+        return value_and_grad(f, True)
 
     def _program(self, steady: S.SteadyState, args):
-        """The compiled program of [`_program_spec`][optim.steady.SteadyEvaluator._program_spec] for
+        """The compiled program of [`_program_fun`][optim.steady.SteadyEvaluator._program_fun] for
         ``args`` = (the design, the orbit's section state, its monodromy): one program serves every
         design of a regime, and every evaluator of the same problem (its start aside: multistart runs
         share it). Compiled at its first use (the budget checked first), or taken from a compilation
         [`prepare`][optim.steady.SteadyEvaluator.prepare] started; timed into ``compile_seconds``."""
-        key, fun = self._program_spec(steady)
+        key = self._program_key(steady)
         if key not in _PROGRAMS:
             pending = _PENDING.pop(key, None)
             if pending is None:
                 if self.budget is not None:
                     self.budget.check("compiling the gradient program")
-                program, seconds = _compile(fun, args, key)
+                program, seconds = _compile(self._program_fun(steady), args, key)
             else:
                 program, seconds = pending.result()
             self.compile_seconds += seconds
@@ -362,15 +370,14 @@ class SteadyEvaluator:
         SI design ``x`` (cached: no new solve) will need, while the caller goes on (the way in
         classifying further candidates). Returns whether a compilation was started (False: ``x``
         is not periodic or not solved yet, or its program is compiled or being compiled)."""
-        kept = self._kept is not None and self._kept[0] == _key(x)
-        steady = self._kept[1] if kept else self._steady.get(_key(x))
+        steady = self._known(_key(x))
         if steady is None or not steady.periodic:
             return False
-        key, fun = self._program_spec(steady)
+        key = self._program_key(steady)
         if key in _PROGRAMS or key in _PENDING:
             return False
         args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
-        _PENDING[key] = _compiler().submit(_compile, fun, args, key)
+        _PENDING[key] = _compiler().submit(_compile, self._program_fun(steady), args, key)
         return True
 
     def _gradient_done(self) -> None:
