@@ -6,10 +6,11 @@ any planar linkage with clearance joints. Imports nothing else of jaxcrank but
 Importing the package registers every joint law in
 [`JOINT_LAWS`][jaxcrank.physics.joints.JOINT_LAWS], those defined outside
 [`jaxcrank.physics.joints`][] included ([`Lubricated`][jaxcrank.physics.lubrication.Lubricated],
-[`GuideClearance`][jaxcrank.physics.guide.GuideClearance]).
+[`GuideClearance`][jaxcrank.physics.guide.GuideClearance], [`Worn`][jaxcrank.physics.wear.Worn]).
 """
 
 from .guide import GuideClearance
 from .lubrication import Lubricated
+from .wear import Worn
 
-__all__ = ["GuideClearance", "Lubricated"]
+__all__ = ["GuideClearance", "Lubricated", "Worn"]

@@ -10,6 +10,8 @@ preset: ``--mechanism NAME``, [`jaxcrank.physics.presets.preset`][]):
 - ``paper-lubricated`` ([`paper_lubricated`][jaxcrank.physics.catalogue.paper_lubricated]) and
   ``four-bar-lubricated`` ([`four_bar_lubricated`][jaxcrank.physics.catalogue.four_bar_lubricated]):
   the paper's slider-crank and the four-bar with oil in the bearings of B and C;
+- ``paper-wear`` ([`paper_wear`][jaxcrank.physics.catalogue.paper_wear]): the paper's slider-crank
+  whose pins B and C wear ([`Worn`][jaxcrank.physics.wear.Worn], Archard's law);
 - ``flores`` ([`flores`][jaxcrank.physics.catalogue.flores]): Flores and Ambrósio's high-speed
   slider-crank with a clearance joint at the slider pin, the benchmark of the
   clearance-joint literature.
@@ -26,6 +28,7 @@ from .laws import Ambrosio, LankaraniNikravesh
 from .lubrication import Lubricated
 from .params import Contact, Friction, Material
 from .presets import RPM, FourBar, SliderCrank, with_clearance
+from .wear import Archard, from_clearance
 
 
 def slider_crank_ground_pivot() -> SliderCrank:
@@ -70,6 +73,30 @@ def paper_lubricated() -> SliderCrank:
     base = SliderCrank()
     joints = {**base.joints, "B": _oiled(base.joints["B"]), "C": _oiled(base.joints["C"])}
     return SliderCrank(joints=joints, name="slider-crank-lubricated")
+
+
+#: the wear law of ``paper-wear``: every value assumed (the paper gives no wear data), see paper_wear
+PAPER_WEAR = Archard(hole_coefficient=1e-7, pin_coefficient=1e-8, hole_hardness=0.64e9, pin_hardness=1.6e9, length=0.02)
+
+
+def paper_wear() -> SliderCrank:
+    """The paper's slider-crank ([`jaxcrank.physics.presets.paper`][]) whose pins at B and C
+    wear: each a [`Worn`][jaxcrank.physics.wear.Worn] joint, new (round), with the paper's 8 / 7.5 mm
+    radii, laws and materials, 24 Fourier modes per profile and the wear law ``PAPER_WEAR``.
+
+    The paper gives no wear data; every wear value is assumed:
+
+    - a bronze bushing (the hole) on a steel pin: hardness 0.64 GPa (65 HB, the bearing
+      bronze C93200's data sheet) and 1.6 GPa (163 HB, AISI 1045's);
+    - dimensionless wear coefficients 1e-7 (bushing) and 1e-8 (pin): mild wear, the low end
+      of the dry range (Archard & Hirst's dry coefficients span about 1e-7 to 1e-2);
+    - a bearing 20 mm long (the paper gives none).
+
+    The elastic constants stay the paper preset's steel on steel (E = 207 GPa), so that a
+    new ``paper-wear`` moves exactly as ``paper``."""
+    base = SliderCrank()
+    worn = {j: from_clearance(base.joints[j], PAPER_WEAR) for j in ("B", "C")}
+    return SliderCrank(joints={**base.joints, **worn}, name="slider-crank-wear")
 
 
 def four_bar_lubricated() -> FourBar:

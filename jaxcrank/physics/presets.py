@@ -381,6 +381,7 @@ PRESETS: dict[str, Callable[[], AbstractMechanism]] = {
     "paper-lubricated": _catalogue("paper_lubricated"),
     "four-bar-lubricated": _catalogue("four_bar_lubricated"),
     "flores": _catalogue("flores"),
+    "paper-wear": _catalogue("paper_wear"),
 }
 
 
