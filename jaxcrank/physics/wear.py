@@ -169,6 +169,8 @@ class Worn(AbstractPinInHole):
 
     name: ClassVar[str] = "worn"
     kinds: ClassVar[tuple[str, ...]] = ("revolute",)
+    #: the fields that are arrays (lists of numbers in TOML files)
+    array_fields: ClassVar[tuple[str, ...]] = ("hole_wear", "pin_wear")
 
     hole_radius: float
     pin_radius: float

@@ -1,8 +1,9 @@
 """Command line: ``jaxcrank simulate [--config FILE | --design RESULT_JSON] [--out DIR]
 [--set KEY=VALUE ...]``, ``jaxcrank sweep --spec FILE [--out DIR] [--resume]``, ``jaxcrank steady``
 ([`jaxcrank.runs.steady_cli`][]), ``jaxcrank regimes`` ([`jaxcrank.runs.regimes_cli`][]),
-``jaxcrank optimize`` ([`optim.cli`][]), ``jaxcrank fit`` ([`optim.fit_cli`][]), ``jaxcrank assemble``,
-``jaxcrank draw`` and ``jaxcrank animate`` ([`jaxcrank.runs.view_cli`][]).
+``jaxcrank life`` ([`jaxcrank.runs.life_cli`][]), ``jaxcrank optimize`` ([`optim.cli`][]),
+``jaxcrank fit`` ([`optim.fit_cli`][]), ``jaxcrank assemble``, ``jaxcrank draw`` and
+``jaxcrank animate`` ([`jaxcrank.runs.view_cli`][]).
 
 A command's options are added, and JAX imported, only once the command is named:
 ``jaxcrank --help`` lists the commands without loading JAX."""
@@ -27,6 +28,7 @@ COMMANDS = {
     "fit": "calibrate parameters (clearances, restitution, ...) against a measured trace, with confidence intervals",
     "assemble": "assemble a linkage at a driver angle: the poses, each dyad's branch, the lines that keep it",
     "draw": "draw a linkage at a driver angle (PNG, SVG, PDF) and print its kinematic summary",
+    "life": "wear the mechanism's worn joints over many cycles: worn profiles, metrics and the life to a limit",
     "animate": "animate a run's mechanism (GIF, MP4, HTML), the ideal one beside it and the pins in their holes",
 }
 
@@ -203,6 +205,10 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
             from . import regimes_cli
 
             regimes_cli.add_arguments(p)
+        elif name == "life":
+            from . import life_cli
+
+            life_cli.add_arguments(p)
         elif name == "assemble":
             from . import assemble_cli
 
@@ -230,6 +236,7 @@ def main(argv=None) -> int:
         print(f"{command}: starting (loading JAX)", file=sys.stderr, flush=True)
     args = parser(command if command in COMMANDS else None).parse_args(argv)
 
+    from ..analysis.life import LifeError
     from ..errors import CorruptFileError
     from ..numerics.solve import SimulationError
     from ..numerics.steady import SteadyStateError
@@ -250,6 +257,10 @@ def main(argv=None) -> int:
             from . import regimes_cli
 
             return regimes_cli.run(args)
+        if args.command == "life":
+            from . import life_cli
+
+            return life_cli.run(args)
         if args.command == "optimize":
             if (args.problem or "").endswith(".toml"):  # a problem file: optim.file_cli
                 from optim import file_cli
@@ -270,7 +281,7 @@ def main(argv=None) -> int:
             from . import view_cli
 
             return (view_cli.run_draw if args.command == "draw" else view_cli.run_animate)(args)
-    except (ParameterError, SimulationError, SteadyStateError, CorruptFileError) as err:
+    except (ParameterError, SimulationError, SteadyStateError, LifeError, CorruptFileError) as err:
         print(f"jaxcrank: error: {err}", file=sys.stderr)
         return 2
     except OSError as err:  # unwritable or full output directory, missing input file, ...

@@ -20,6 +20,7 @@ import dataclasses
 import math
 
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 from ..physics.compiled import compile_model
@@ -63,6 +64,14 @@ def _fields(obj) -> list[str]:
     return [f.name for f in dataclasses.fields(obj) if f.init]
 
 
+def _field_plain(obj, k):
+    """Field ``k`` of ``obj`` as TOML data: a list of numbers for the fields a class names in
+    its ``array_fields`` (e.g. a worn joint's profiles), else [`_plain`][jaxcrank.runs.codec._plain]."""
+    if k in getattr(type(obj), "array_fields", ()):
+        return [float(x) for x in np.asarray(getattr(obj, k)).ravel()]
+    return _plain(getattr(obj, k))
+
+
 def _plain(value):
     """A field's value as TOML data."""
     for base, _ in _NAMED_LAWS:
@@ -70,7 +79,7 @@ def _plain(value):
             return value.name
     for base, key, _ in _POLYMORPHIC:
         if isinstance(value, base):
-            return {key: value.name, **{k: _plain(getattr(value, k)) for k in _fields(value)}}
+            return {key: value.name, **{k: _field_plain(value, k) for k in _fields(value)}}
     if isinstance(value, Point):
         return [float(value.x), float(value.y)]
     if isinstance(value, Pose):
@@ -80,7 +89,7 @@ def _plain(value):
     if isinstance(value, Outputs):
         return _outputs_plain(value)
     if isinstance(value, eqx.Module):
-        return {k: _plain(getattr(value, k)) for k in _fields(value) if getattr(value, k) is not None}
+        return {k: _field_plain(value, k) for k in _fields(value) if getattr(value, k) is not None}
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, tuple):
@@ -223,6 +232,10 @@ def _convert(value, current, field, path):
         if not isinstance(value, str):
             raise ParameterError(f"{_where(path)} must be a string, got {value!r}")
         return value
+    if np.ndim(current) == 1 and not isinstance(current, tuple):
+        if not isinstance(value, (list, tuple)):
+            raise ParameterError(f"{_where(path)} must be a list of numbers, got {value!r}")
+        return jnp.asarray([_number(v, path) for v in value], dtype=float)
     if isinstance(current, tuple):
         if not isinstance(value, (list, tuple)):
             raise ParameterError(f"{_where(path)} must be a list of numbers, got {value!r}")
