@@ -4,18 +4,18 @@ The public API is what ``__all__`` lists. The modules live in five layers, each
 importing only from the ones before it:
 
 - ``jaxcrank.physics``: the description (``linkage``, ``drivers``, ``presets``, ``joints``,
-  ``laws``, ``memory``, ``params``, ``parameters``), its structure (``topology``,
+  ``laws``, ``memory``, ``wear``, ``params``, ``parameters``), its structure (``topology``,
   ``planner``, ``closure``, ``assembly``), the compiled model (``compiled``) and the
   equations (``state``, ``kinematics``, ``dynamics``, ``frame``, ``signals``, re-exported by
   ``model``; ``ideal``, ``reference``);
 - ``jaxcrank.numerics``: ``results``, ``solve``, ``rosenbrock``, ``linalg``, ``tracking``, ``runtime``, ``shooting``,
-  ``steady``;
-- ``jaxcrank.analysis``: ``metrics``, ``outputs``, ``kinematic_summary``, and the validation
-  rigs in ``analysis.validation`` (``wall_impact``, ``memory_audit``);
+  ``steady``, ``wear_run``;
+- ``jaxcrank.analysis``: ``metrics``, ``outputs``, ``kinematic_summary``, ``life``, ``life_gradient``, and the
+  validation rigs in ``analysis.validation`` (``wall_impact``, ``memory_audit``);
 - ``jaxcrank.views``: ``geometry``, ``drawing`` (``draw``), ``animation`` (``animate``),
   on matplotlib;
 - ``jaxcrank.runs``: ``sweep``, ``engines``, ``sampling``, ``spec``, ``config``, ``cache``, ``plots``, ``cli``,
-  ``steady_cli``, ``regimes``, ``regimes_cli``, ``view_cli``.
+  ``steady_cli``, ``regimes``, ``regimes_cli``, ``view_cli``, ``life_cli``, ``plots_life``.
 
 Importing jaxcrank turns on float64 and adds two XLA CPU options to ``XLA_FLAGS``
 ([`jaxcrank.numerics.runtime`][]): a documented, process-wide decision; what it changes
@@ -42,6 +42,7 @@ else:  # JAX reads this when it is imported (importing it here would delay the f
 if TYPE_CHECKING:  # what type checkers and the API docs read; at run time each name loads on first use (_FROM)
     from .analysis import metrics, outputs
     from .analysis.kinematic_summary import kinematic_summary
+    from .analysis.life import LifeOptions, life
     from .errors import CorruptFileError
     from .numerics import solve
     from .numerics.results import RESULTS, Regime
@@ -69,6 +70,7 @@ if TYPE_CHECKING:  # what type checkers and the API docs read; at run time each 
     from .physics.parameters import get_parameter, parameter_value, set_parameter, set_parameters
     from .physics.params import Contact, Friction, Material, ParameterError
     from .physics.presets import PRESETS, FourBar, SliderCrank, four_bar, paper, preset, with_clearance
+    from .physics.wear import Archard, Worn
     from .runs import config, sampling
     from .views.animation import animate
     from .views.drawing import draw
@@ -86,6 +88,8 @@ _FROM = {
     "numerics.steady": ("SteadyState", "SteadyStateError", "steady_state"),
     "physics": ("ideal", "laws", "model", "params", "presets"),
     "physics.joints": ("JOINT_LAWS", "Clearance", "Ideal"),
+    "physics.wear": ("Archard", "Worn"),
+    "analysis.life": ("LifeOptions", "life"),
     "physics.laws": ("CONTACT_LAWS", "FRICTION_LAWS"),
     "physics.compiled": ("Model", "compile_model"),
     "physics.drivers": ("ConstantSpeed", "SpeedProfile", "Torque"),
@@ -111,6 +115,8 @@ _LAZY = {
     "rosenbrock": "numerics.rosenbrock",
     "tracking": "numerics.tracking",
     "shooting": "numerics.shooting",
+    "wear_run": "numerics.wear_run",
+    "life_gradient": "analysis.life_gradient",
     "impact": "analysis.validation.wall_impact",
     "audit": "analysis.validation.memory_audit",
     "sweep": "runs.sweep",
@@ -147,6 +153,7 @@ except PackageNotFoundError:  # a source tree that was not installed
     __version__ = "0+unknown"
 
 __all__ = [
+    "life",
     "animate",
     "draw",
     "kinematic_summary",
@@ -159,6 +166,7 @@ __all__ = [
     "RESULTS",
     "SOLVERS",
     "AbstractMechanism",
+    "Archard",
     "Body",
     "BodyVector",
     "Clearance",
@@ -169,6 +177,7 @@ __all__ = [
     "Friction",
     "FrozenMemory",
     "Ideal",
+    "LifeOptions",
     "Linkage",
     "Material",
     "Model",
@@ -181,6 +190,7 @@ __all__ = [
     "Revolute",
     "Site",
     "SliderCrank",
+    "Worn",
     "SpeedProfile",
     "Torque",
     "four_bar",

@@ -63,7 +63,7 @@ class LifeOptions:
         solve: the solve settings of the wear averaged over a motion that is not periodic.
     """
 
-    rtol: float = 0.05
+    rtol: float = 0.01
     atol: float | None = None
     first_wear: float = 0.02
     max_growth: float = 4.0

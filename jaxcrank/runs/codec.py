@@ -5,9 +5,9 @@ A dict names its kind with ``mechanism``: a preset class (``"slider-crank"``,
 written out: ``[ground]``, ``[bodies.<name>]``, ``[joints.<name>]``, ``[outputs]``).
 Every mechanism has ``[joints.<name>]`` tables (``law = "ideal"``, ``"clearance"``, ...
 and the law's settings, with sub-tables ``contact``, ``friction``, ``memory``,
-``pin_material``, ``hole_material``), a ``[driver]`` table (``type = "constant_speed"``,
-``body``, ``speed``, ...) and ``gravity``. Points are ``[x, y]`` (m), poses
-``[x, y, angle]``, joint sites ``"body.point"``. Every value is SI.
+``pin_material``, ``hole_material``; a worn joint's profiles are lists), a ``[driver]`` table (``type =
+"constant_speed"``, ``body``, ``speed``, ...) and ``gravity``. Points are ``[x, y]`` (m), poses ``[x, y, angle]``,
+joint sites ``"body.point"``. Every value is SI.
 
 [`to_dict`][jaxcrank.runs.codec.to_dict] and [`from_dict`][jaxcrank.runs.codec.from_dict] are inverse; the
 conversion walks the equinox Modules' fields, so a new law or driver needs no code here, only its name
@@ -65,11 +65,9 @@ def _fields(obj) -> list[str]:
 
 
 def _field_plain(obj, k):
-    """Field ``k`` of ``obj`` as TOML data: a list of numbers for the fields a class names in
-    its ``array_fields`` (e.g. a worn joint's profiles), else [`_plain`][jaxcrank.runs.codec._plain]."""
-    if k in getattr(type(obj), "array_fields", ()):
-        return [float(x) for x in np.asarray(getattr(obj, k)).ravel()]
-    return _plain(getattr(obj, k))
+    """Field ``k`` of ``obj`` as TOML data (a list for the fields its class names in ``array_fields``)."""
+    arrays = getattr(type(obj), "array_fields", ())
+    return [float(x) for x in np.ravel(getattr(obj, k))] if k in arrays else _plain(getattr(obj, k))
 
 
 def _plain(value):
@@ -163,8 +161,7 @@ def _registry_for(template):
 
 
 def _build(cls, table: dict, template, path: list[str]):
-    """An instance of Module ``cls`` from ``table``; missing fields keep ``template``'s
-    values (or the class defaults)."""
+    """An instance of Module ``cls`` from ``table``; missing fields keep ``template``'s values (or the defaults)."""
     if not isinstance(table, dict):
         raise ParameterError(f"[{_where(path)}] must be a table, got {table!r}")
     known = {f.name: f for f in dataclasses.fields(cls) if f.init}
@@ -232,14 +229,11 @@ def _convert(value, current, field, path):
         if not isinstance(value, str):
             raise ParameterError(f"{_where(path)} must be a string, got {value!r}")
         return value
-    if np.ndim(current) == 1 and not isinstance(current, tuple):
+    if isinstance(current, tuple) or np.ndim(current) == 1:  # a tuple, or an array field (a worn profile)
         if not isinstance(value, (list, tuple)):
             raise ParameterError(f"{_where(path)} must be a list of numbers, got {value!r}")
-        return jnp.asarray([_number(v, path) for v in value], dtype=float)
-    if isinstance(current, tuple):
-        if not isinstance(value, (list, tuple)):
-            raise ParameterError(f"{_where(path)} must be a list of numbers, got {value!r}")
-        return tuple(_number(v, path) for v in value)
+        numbers = tuple(_number(v, path) for v in value)
+        return numbers if isinstance(current, tuple) else jnp.asarray(numbers, dtype=float)
     return _number(value, path)
 
 
@@ -272,9 +266,8 @@ def _outputs(table, path) -> Outputs:
 
 
 def merge(base: dict, changes: dict) -> dict:
-    """``base`` updated by ``changes``, table by table. A table whose law or type
-    (``law``, ``type``) changes is replaced, not merged (another law has other settings):
-    ``base`` itself too."""
+    """``base`` updated by ``changes``, table by table. A table whose law or type (``law``, ``type``) changes is
+    replaced, not merged (another law has other settings): ``base`` itself too."""
     if any(key in changes and key in base and changes[key] != base[key] for key in ("law", "type")):
         return dict(changes)
     out = dict(base)
@@ -407,10 +400,8 @@ def from_dict(data: dict, base: AbstractMechanism | None = None) -> AbstractMech
     assembly are checked here.
 
     Raises:
-        ParameterError: for an unknown kind or key, a wrong type, a value out of its
-            range (the message names the table and key), or a structure or assembly
-            that does not hold together.
-    """
+        ParameterError: for an unknown kind or key, a wrong type, a value out of its range (the message names
+            the table and key), or a structure or assembly that does not hold together."""
     mech = _mechanism(data, base)
     compile_model(mech)
     return mech
@@ -451,11 +442,8 @@ def _mechanism(data: dict, base: AbstractMechanism | None) -> AbstractMechanism:
 
 
 def _onto(default: dict, given):
-    """A joint table given for a preset, completed by the preset's own law table (a
-    table that names another law replaces it)."""
-    if given is None:
-        return default
-    return merge(default, given) if isinstance(given, dict) else given
+    """A joint table given for a preset, completed by the preset's law table (one naming another law replaces it)."""
+    return default if given is None else merge(default, given) if isinstance(given, dict) else given
 
 
 def _field(obj, name):

@@ -38,7 +38,7 @@ def add_arguments(p):
     )
     p.add_argument("--metric", help="the metric whose limit ends the life (a column of life.csv)")
     p.add_argument("--limit", type=float, help="the metric's limit (in the metric's unit)")
-    p.add_argument("--rtol", type=float, default=0.05, help="step error relative to the deepest wear (0.05)")
+    p.add_argument("--rtol", type=float, default=0.01, help="step error relative to the deepest wear (0.01)")
     p.add_argument(
         "--average-revolutions", type=int, default=10, help="not periodic: revolutions the wear is averaged over (10)"
     )
@@ -159,7 +159,7 @@ def run(args) -> int:
         prior = (
             [float(c) for c in data["cycles"][:-1]],
             data["profiles"][:-1],
-            data["schedule"][:-1],
+            data["schedule"],
             data["rejected"],
         )
     else:

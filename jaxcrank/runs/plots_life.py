@@ -22,17 +22,21 @@ def _chosen(n: int, most: int = 6) -> list[int]:
     return sorted({int(round(i)) for i in np.linspace(0, n - 1, most)})
 
 
-def profiles_figure(mech, cycles, profiles, path: Path) -> Path:
+def profiles_figure(mech, cycles, profiles, path: Path, at=None) -> Path:
     """Per worn joint, the hole's radius (polar, the wear exaggerated to a tenth of the
     radius at the deepest point) and both depths against the angle in the surface's frame,
-    at up to six points of the run over the new (round) surface."""
+    over the new (round) surface: at up to six points spread over the run, or at the points
+    nearest the cycles ``at``."""
     import jax.numpy as jnp
 
     from ..physics.wear import profile_on_grid
 
     joints = list(profiles[0])
     theta = np.linspace(0.0, 2.0 * math.pi, 361)
-    picks = _chosen(len(cycles))
+    if at is None:
+        picks = _chosen(len(cycles))
+    else:
+        picks = sorted({int(np.argmin(np.abs(np.asarray(cycles, dtype=float) - c))) for c in at})
     colours = plt.cm.viridis(np.linspace(0.0, 0.9, len(picks)))
     with style():
         fig = plt.figure(figsize=(8, 3.6 * len(joints)))
