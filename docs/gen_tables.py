@@ -921,6 +921,70 @@ def table_calibration_bench() -> str:
     )
 
 
+def table_life_validation() -> str:
+    """Cycle averaging against brute force at the same worn volume, per rtol."""
+    d = results("life_validation")
+    rows = []
+    for r in d["cycle_averaged"]:
+        m = r["metrics"]
+        rows.append([
+            fmt(r["rtol"]), f"{r['points'] - 1} ({r['rejected']} rejected)", fmt(r["seconds"]),
+            f"{100 * r['B_hole_profile_error_of_max_depth']:.2f} %",
+            f"{100 * r['C_hole_profile_error_of_max_depth']:.2f} %",
+            *[f"{100 * m[k]['relative_difference']:.2f} %" for k in m],
+        ])  # fmt: skip
+    names = list(d["cycle_averaged"][0]["metrics"])
+    head = ["rtol", "steps", "time [s]", "hole B profile", "hole C profile", *names]
+    bf = d["brute_force"]
+    return (
+        table(head, rows)
+        + f"\n*Profile: largest difference over the angle, relative to the brute force's deepest wear; metrics: "
+        f"relative difference. Brute force: {d['revolutions']} revolutions, {bf['steps']:,} steps, "
+        f"{fmt(bf['seconds'])} s.*\n" + source("life_validation")
+    )
+
+
+def table_life_gradients() -> str:
+    """Exact life gradients against central differences of whole life runs, per design."""
+    d = results("life_gradients")
+    rows = []
+    for r in d["designs"]:
+        rows.append([
+            ", ".join(f"{u:+g}" for u in r["design_u"]), ", ".join(r["regimes"]), fmt(r["metric_after_cycles"], 6),
+            fmt(r["cycles_to_limit"], 4), f"{100 * r['relative_error_metric']:.3f} %",
+            f"{100 * r['relative_error_life']:.3f} %",
+            fmt(r["seconds"]["gradients"]), fmt(r["seconds"]["differences"]),
+        ])  # fmt: skip
+    head = ["design u (coupler mass, clearance B)", "regimes", f"{d['metric']} after {d['cycles']:g} cycles",
+            "life [cycles]", "gradient error, metric", "gradient error, life", "gradient [s]",
+            "differences [s]"]  # fmt: skip
+    return (
+        table(head, rows)
+        + "\n*Error: norm of (gradient - central differences) / norm of the differences.*\n"
+        + source("life_gradients")
+    )
+
+
+def table_paper_wear() -> str:
+    """The paper's slider-crank over its life: the points of ``bench/paper_wear.py``'s run."""
+    d = results("paper_wear")
+    rows = [
+        [fmt(p["cycles"]), p["regime"], f"{1e6 * p['B_hole_max_depth_m']:.1f}",
+         f"{1e6 * p['C_hole_max_depth_m']:.1f}", f"{1e3 * p['B_clearance_m']:.4f}", f"{1e3 * p['C_clearance_m']:.4f}",
+         fmt(p["rms_transmission_angle_error_deg"]), fmt(p["peak_contact_force_B_N"])]
+        for p in d["points"]
+    ]  # fmt: skip
+    head = ["cycles", "regime", "deepest wear, hole B [um]", "hole C [um]", "largest gap B [mm]", "gap C [mm]",
+            "RMS transmission-angle error [deg]", "peak force B [N]"]  # fmt: skip
+    life = d.get("life") or {}
+    note = ""
+    if life:
+        reached = life.get("cycles_to_limit")
+        when = f"{reached:.3g} cycles" if reached else f"not reached in {d['stages'][-1]:g} cycles"
+        note = f"\n*Life to {life['metric']} = {life['limit']:g}: {when}; rtol {d['rtol']:g}.*\n"
+    return table(head, rows) + note + source("paper_wear")
+
+
 TABLES = {
     "animate": table_animate,
     "compile": table_compile,
@@ -941,6 +1005,9 @@ TABLES = {
     "design_gradient": table_design_gradient,
     "window_gradients": table_window_gradients,
     "calibration_bench": table_calibration_bench,
+    "life_validation": table_life_validation,
+    "life_gradients": table_life_gradients,
+    "paper_wear": table_paper_wear,
     "headline": headline,
 }
 
