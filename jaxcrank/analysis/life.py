@@ -11,8 +11,8 @@ at frozen geometry and advanced over many cycles at once:
    ([`jaxcrank.numerics.wear_run`][]), the rate r(P) of the profiles P;
 3. a step of Delta N cycles by Heun's method, ``P + Delta N (r(P) + r(P + Delta N r(P))) / 2``,
    whose error estimate ``Delta N |r(P + Delta N r(P)) - r(P)| / 2`` (the deepest
-   difference around each surface) is held below ``rtol`` times the deepest wear plus
-   ``atol``; Delta N grows or shrinks with the square root of the ratio (order 2);
+   difference around each surface) is held below ``rtol`` times the joint's deepest wear
+   plus ``atol``; Delta N grows or shrinks with the square root of the ratio (order 2);
 4. repeat, warm-starting each steady state from the last, until ``cycles``.
 
 [`life`][jaxcrank.analysis.life.life] returns every accepted point ([`Life`][jaxcrank.analysis.life.Life]): cycles,
@@ -50,8 +50,8 @@ class LifeOptions:
     """Settings of [`life`][jaxcrank.analysis.life.life].
 
     Attributes:
-        rtol: the step's error estimate of every profile, relative to its deepest wear (> 0).
-        atol: its absolute part, m (None: 1e-3 of the smallest worn joint's clearance).
+        rtol: the step's error estimate of every profile, relative to its joint's deepest wear (> 0).
+        atol: its absolute part, m (None: 1e-6 of the smallest worn joint's clearance).
         first_wear: the first step wears this fraction of the smallest clearance at the
             deepest point (> 0).
         max_growth: the most a step grows over the last one (> 1).
@@ -219,11 +219,13 @@ def heun(profiles, r0, r1, dn):
 
 
 def _error_ratio(profiles, r0, r1, dn, rtol, atol, angles):
+    """The step's error estimate over its tolerance, the largest over the surfaces: each
+    surface's deepest ``dn |r1 - r0| / 2`` against ``atol + rtol x`` its joint's deepest wear."""
     ratio = 0.0
-    for j, (hole, pin) in profiles.items():
-        for s, surface in enumerate((hole, pin)):
+    for j, pair in profiles.items():
+        size = max(float(_max_depth(surface, angles)) for surface in pair)
+        for s in range(2):
             err = 0.5 * dn * float(_max_depth(r1[j][s] - r0[j][s], angles))
-            size = float(_max_depth(surface, angles))
             ratio = max(ratio, err / (atol + rtol * size))
     return ratio
 
@@ -267,7 +269,7 @@ def life(
         raise ParameterError(f"cycles = {cycles!r} must be > 0")
     angles = jnp.linspace(0.0, 2.0 * math.pi, 720, endpoint=False)
     c_min = min(float(mech.joints[j].clearance) for j in joints)
-    atol = options.atol if options.atol is not None else 1e-3 * c_min
+    atol = options.atol if options.atol is not None else 1e-6 * c_min
     if resume is not None:
         run = resume
     else:
