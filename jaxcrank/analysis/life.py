@@ -34,7 +34,7 @@ import numpy as np
 from ..numerics import wear_run as nw
 from ..numerics.results import RESULTS
 from ..numerics.shooting import SteadyOptions
-from ..numerics.solve import SolveOptions
+from ..numerics.solve import SolveOptions, simulate
 from ..numerics.steady import SteadyState, steady_state
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
@@ -58,8 +58,10 @@ class LifeOptions:
         max_steps: accepted and rejected steps at most.
         average_revolutions: not periodic: revolutions the wear is averaged over (>= 2).
         steady: the steady-state settings (statistics on failure by default, so that a
-            motion that is not periodic gives statistics instead of an error).
-        warm_settle: settle revolutions of the steady states after the first (each warm-started).
+            motion that is not periodic gives statistics instead of an error; 10 million
+            steps per solve, for the start-up in a worn hole).
+        warm_settle: settle revolutions of a warm-started steady state (every one: the first
+            starts from ``steady.settle_revolutions`` from rest at the tolerances of ``solve``).
         solve: the solve settings of the wear averaged over a motion that is not periodic.
     """
 
@@ -69,7 +71,7 @@ class LifeOptions:
     max_growth: float = 4.0
     max_steps: int = 200
     average_revolutions: int = 10
-    steady: SteadyOptions = SteadyOptions(statistics_on_failure=True)
+    steady: SteadyOptions = SteadyOptions(statistics_on_failure=True).replace(max_steps=10_000_000)
     warm_settle: int = 4
     solve: SolveOptions = SolveOptions(rtol=1e-8, atol=1e-8, max_steps=10_000_000)
 
@@ -113,6 +115,12 @@ def wear_per_cycle(mech: Mechanism, options: LifeOptions = LIFE_OPTIONS, warm_st
         LifeError: when the steady state or the wear's solve fails (the message says what to change).
     """
     so = options.steady
+    if (
+        warm_start is None
+    ):  # settle from rest at the wear's looser tolerance first: a start-up in a worn hole is violent
+        rest = simulate(mech, ts=jnp.array([0.0, so.settle_revolutions * float(mech.period)]), options=options.solve,
+                        throw=False)  # fmt: skip
+        warm_start = rest.ys[-1].at[-2:].set(0.0) if bool(rest.ok) else None
     if warm_start is not None:
         so = so.replace(settle_revolutions=options.warm_settle)
     steady = steady_state(mech, so, warm_start=warm_start, throw=False)

@@ -95,8 +95,9 @@ def profile_rows(cycles, profiles) -> list[dict]:
     return out
 
 
-def _checkpoint(out: Path, run, rows) -> None:
+def _checkpoint(out: Path, run, rows, section_state=None) -> None:
     data = {
+        "section_state": None if section_state is None else [float(v) for v in section_state],
         "cycles": [float(c) for c in run.cycles],
         "profiles": [
             {j: [list(map(float, h)), list(map(float, p))] for j, (h, p) in pr.items()} for pr in run.profiles
@@ -116,7 +117,6 @@ def run(args) -> int:
 
     from ..analysis import life as lf
     from ..numerics import wear_run as nw
-    from ..numerics.shooting import SteadyOptions
 
     # --wear first, so that --set can reach the new worn joints' wear law
     base = argparse.Namespace(**{**vars(args), "overrides": [], "rpm": None})
@@ -141,7 +141,7 @@ def run(args) -> int:
     options = lf.LifeOptions(
         rtol=args.rtol,
         average_revolutions=args.average_revolutions,
-        steady=SteadyOptions(statistics_on_failure=True, samples_per_revolution=args.samples_per_revolution),
+        steady=lf.LIFE_OPTIONS.steady.replace(samples_per_revolution=args.samples_per_revolution),
     )
     say = (lambda text: None) if args.quiet else (lambda text: print(f"life: {text}", flush=True))
     start = time.perf_counter()
@@ -153,7 +153,8 @@ def run(args) -> int:
         last = {j: (jnp.asarray(h), jnp.asarray(p)) for j, (h, p) in data["profiles"][-1].items()}
         here = nw.with_profiles(mech, last)
         say(f"resuming at {data['cycles'][-1]:.4g} cycles ({len(data['cycles'])} points done)")
-        point = lf.wear_per_cycle(here, options)
+        warm = None if data.get("section_state") is None else jnp.asarray(data["section_state"])
+        point = lf.wear_per_cycle(here, options, warm_start=warm)  # from the last orbit's section state
         resume = lf.Life(mech, [data["cycles"][-1]], [last], [point], [], list(data["schedule"][-1:]), 0, options)
         done_rows = data["rows"][:-1]
         prior = (
@@ -173,7 +174,7 @@ def run(args) -> int:
         ]
         schedule = prior[2] + list(r.schedule[1:] if resume is not None else r.schedule)
         full = lf.Life(mech, cycles, profiles, [], [], schedule, prior[3] + r.rejected, options)
-        _checkpoint(out, full, rows)
+        _checkpoint(out, full, rows, r.points[-1].steady.section_state)
         row = rows[-1]
         depths = ", ".join(f"{j} hole {1e6 * row[f'{j}_hole_max_depth_m']:.3g} um" for j in nw.worn_joints(mech))
         say(f"{row['cycles']:.4g} cycles: {row['regime']}, deepest wear {depths}")
