@@ -9,7 +9,6 @@ profiles at 0, 1e6 and 1e7 cycles; the first orbit's contact arcs) and
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import shutil
 import subprocess
@@ -21,42 +20,56 @@ OUT = ROOT / "bench" / "results"
 IMG = ROOT / "docs" / "img"
 RTOL = 0.05
 STAGES = (1e6, 1e7)
+#: the life's limit: the largest gap at B, m (the new clearance plus a fifth)
+LIMIT = 6e-4
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results-only", action="store_true", help="only write the JSON and figures of the run")
     parser.add_argument("--out", type=Path, default=Path("runs/paper-wear"), help="the run's directory")
     args = parser.parse_args(argv)
-    for i, cycles in enumerate(STAGES):
+    for i, cycles in enumerate(() if args.results_only else STAGES):
         done = args.out / "checkpoint.json"
         if done.exists() and json.loads(done.read_text())["cycles"][-1] >= cycles:
             continue  # this stage is in the run already
         command = [sys.executable, "-m", "jaxcrank.runs.cli", "life", "--mechanism", "paper-wear", "--cycles",
-                   f"{cycles:g}", "--rtol", f"{RTOL:g}", "--metric", "B_clearance_m", "--limit", "6e-4",
+                   f"{cycles:g}", "--rtol", f"{RTOL:g}", "--metric", "B_clearance_m", "--limit", f"{LIMIT:g}",
                    "--out", str(args.out)] + (["--resume"] if i or done.exists() else [])  # fmt: skip
         subprocess.run(command, check=True)
-    rows = list(csv.DictReader((args.out / "life.csv").open()))
+    write_results(args.out)
+    _figures(args.out)
+    return 0
+
+
+def write_results(out: Path) -> None:
+    """``bench/results/paper_wear.json`` and the docs' figures from the run in ``out`` (its
+    checkpoint: a run stopped early gives its points so far)."""
+    from jaxcrank.analysis.life import cycles_to_limit
+
+    data = json.loads((out / "checkpoint.json").read_text())
+    rows = data["rows"]
     keep = ("cycles", "regime", "B_hole_max_depth_m", "B_pin_max_depth_m", "B_hole_volume_m3", "B_clearance_m",
             "C_hole_max_depth_m", "C_pin_max_depth_m", "C_hole_volume_m3", "C_clearance_m",
             "rms_transmission_angle_error_deg", "rms_slider_x_deviation_m", "peak_contact_force_B_N",
             "peak_contact_force_C_N", "rms_contact_force_B_N")  # fmt: skip
-    points = [{k: (r[k] if k == "regime" else float(r[k])) for k in keep if k in r} for r in rows]
-    summary = json.loads((args.out / "summary.json").read_text())
+    points = [{k: r[k] for k in keep if k in r} for r in rows]
+    reached = float(cycles_to_limit(data["cycles"], [r["B_clearance_m"] for r in rows], LIMIT))
+    life = {"metric": "B_clearance_m", "limit": LIMIT, "cycles_to_limit": reached if reached < float("inf") else None}
     OUT.joinpath("paper_wear.json").write_text(
         json.dumps(
             {
                 "command": "python bench/paper_wear.py",
                 "rtol": RTOL,
                 "stages": list(STAGES),
+                "reached_cycles": data["cycles"][-1],
                 "points": points,
-                "life": summary.get("life"),
-                "worn_joints": summary["worn_joints"],
+                "life": life,
             },
             indent=2,
         )  # fmt: skip
     )
-    _figures(args.out)
-    return 0
+    _figures(out)
 
 
 def _figures(out: Path) -> None:
@@ -67,8 +80,10 @@ def _figures(out: Path) -> None:
 
     data = json.loads((out / "checkpoint.json").read_text())
     profiles = [{j: (jnp.asarray(h), jnp.asarray(p)) for j, (h, p) in pr.items()} for pr in data["profiles"]]
-    plots_life.profiles_figure(jc.preset("paper-wear"), data["cycles"], profiles, IMG / "paper-wear-profiles.png",
-                               at=(0.0, *STAGES))  # fmt: skip
+    at = (0.0, *[c for c in STAGES if c <= data["cycles"][-1]], data["cycles"][-1])
+    plots_life.profiles_figure(
+        jc.preset("paper-wear"), data["cycles"], profiles, IMG / "paper-wear-profiles.png", at=at
+    )
     shutil.copy(out / "figures" / "contact_arcs.png", IMG / "paper-wear-contact-arcs.png")
 
 

@@ -928,40 +928,19 @@ def table_life_validation() -> str:
     for r in d["cycle_averaged"]:
         m = r["metrics"]
         rows.append([
-            fmt(r["rtol"]), f"{r['points'] - 1} ({r['rejected']} rejected)", fmt(r["seconds"]),
+            r["error_control"], fmt(r["rtol"]), f"{r['points'] - 1} ({r['rejected']} rejected)", fmt(r["seconds"]),
             f"{100 * r['B_hole_profile_error_of_max_depth']:.2f} %",
             f"{100 * r['C_hole_profile_error_of_max_depth']:.2f} %",
             *[f"{100 * m[k]['relative_difference']:.2f} %" for k in m],
         ])  # fmt: skip
     names = list(d["cycle_averaged"][0]["metrics"])
-    head = ["rtol", "steps", "time [s]", "hole B profile", "hole C profile", *names]
+    head = ["step error control", "rtol", "steps", "time [s]", "hole B profile", "hole C profile", *names]
     bf = d["brute_force"]
     return (
         table(head, rows)
         + f"\n*Profile: largest difference over the angle, relative to the brute force's deepest wear; metrics: "
         f"relative difference. Brute force: {d['revolutions']} revolutions, {bf['steps']:,} steps, "
         f"{fmt(bf['seconds'])} s.*\n" + source("life_validation")
-    )
-
-
-def table_life_gradients() -> str:
-    """Exact life gradients against central differences of whole life runs, per design."""
-    d = results("life_gradients")
-    rows = []
-    for r in d["designs"]:
-        rows.append([
-            ", ".join(f"{u:+g}" for u in r["design_u"]), ", ".join(r["regimes"]), fmt(r["metric_after_cycles"], 6),
-            fmt(r["cycles_to_limit"], 4), f"{100 * r['relative_error_metric']:.3f} %",
-            f"{100 * r['relative_error_life']:.3f} %",
-            fmt(r["seconds"]["gradients"]), fmt(r["seconds"]["differences"]),
-        ])  # fmt: skip
-    head = ["design u (coupler mass, clearance B)", "regimes", f"{d['metric']} after {d['cycles']:g} cycles",
-            "life [cycles]", "gradient error, metric", "gradient error, life", "gradient [s]",
-            "differences [s]"]  # fmt: skip
-    return (
-        table(head, rows)
-        + "\n*Error: norm of (gradient - central differences) / norm of the differences.*\n"
-        + source("life_gradients")
     )
 
 
@@ -980,8 +959,9 @@ def table_paper_wear() -> str:
     note = ""
     if life:
         reached = life.get("cycles_to_limit")
-        when = f"{reached:.3g} cycles" if reached else f"not reached in {d['stages'][-1]:g} cycles"
-        note = f"\n*Life to {life['metric']} = {life['limit']:g}: {when}; rtol {d['rtol']:g}.*\n"
+        when = f"{reached:.3g} cycles" if reached else f"not reached in {d['reached_cycles']:.3g} cycles"
+        note = f"\n*Life to {life['metric']} = {life['limit']:g}: {when}; rtol {d['rtol']:g}; the run stopped at "
+        note += f"{d['reached_cycles']:.3g} cycles.*\n"
     return table(head, rows) + note + source("paper_wear")
 
 
@@ -1006,7 +986,6 @@ TABLES = {
     "window_gradients": table_window_gradients,
     "calibration_bench": table_calibration_bench,
     "life_validation": table_life_validation,
-    "life_gradients": table_life_gradients,
     "paper_wear": table_paper_wear,
     "headline": headline,
 }

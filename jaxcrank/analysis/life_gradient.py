@@ -1,4 +1,4 @@
-"""Exact gradients of a life run: of a metric after N cycles, and of the cycles to a
+"""Gradients of a life run: of a metric after N cycles, and of the cycles to a
 metric's limit, with respect to any design parameters.
 
 A life run ([`life`][jaxcrank.analysis.life.life]) is a chain of maps: at each point, the steady
@@ -6,14 +6,18 @@ orbit's start y*(p, P) (implicit function theorem at the fixed point,
 [`orbit_start`][jaxcrank.numerics.steady.orbit_start]), the wear per cycle r(p, P) over that orbit
 ([`wear_solve`][jaxcrank.numerics.wear_run.wear_solve]) and its metrics; between points, Heun's step
 ``P' = P + dN (r(P) + r(P + dN r(P))) / 2`` (the slow map over cycles). Forward-mode
-derivatives through the whole chain, at the run's accepted steps ``dN`` (held fixed),
-give the exact derivative of what the run computed: the tangent of every profile and
+derivatives through the whole chain, at the run's accepted steps ``dN`` (held fixed), are
+meant to give the derivative of what the run computed: the tangent of every profile and
 metric is carried from point to point (the slow map's tangent linear model, one tangent
 per design variable, ``jax.jacfwd``). Each point's steady state is the run's own, so a
 gradient costs one orbit map and one wear period with tangents per point and predictor.
 
 Every point of the run must be periodic (a motion that is not periodic has long-run
 statistics, which carry no exact gradient).
+
+Status: the derivatives at each point are checked against central differences; the chain
+over steps in cycles is not yet verified against differences of whole life runs (the docs'
+"Wear and life" page), so treat its result as unverified.
 """
 
 from __future__ import annotations
