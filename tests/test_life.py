@@ -1,7 +1,6 @@
 """Life by cycle averaging: the error-controlled steps in cycles against an exact slow
 map (a stand-in wear rate linear in the profile), replayed schedules, the life to a
-limit; and (slow) the command line, its checkpoint and resume, and exact life gradients
-against central differences of whole life runs."""
+limit; and (slow) the command line, its checkpoint and resume."""
 
 from __future__ import annotations
 

@@ -249,26 +249,37 @@ class Clearance(AbstractPinInHole):
     hole_material: Material = Material()
 
     def __check_init__(self):
-        check_range("hole_radius", self.hole_radius, low=0.0, unit="m")
-        check_range("pin_radius", self.pin_radius, low=0.0, unit="m")
-        hole, pin = _concrete(self.hole_radius), _concrete(self.pin_radius)
-        if hole is not None and pin is not None and np.any(pin >= hole):
-            raise ParameterError(
-                f"pin_radius = {np.max(pin):g} m must be smaller than hole_radius = "
-                f"{np.min(hole):g} m (valid range: 0 < pin_radius < hole_radius); "
-                'for a joint without clearance use law = "ideal"'
-            )
-        if not isinstance(self.memory, AbstractMemoryLaw):
-            raise ParameterError(f"memory {self.memory!r} is not a jaxcrank.physics.memory.AbstractMemoryLaw")
+        check_dry_pin_in_hole(self)
 
     def forces(self, kin, state):
         return clearance_contact(self, kin, state)
 
     def state_rate(self, kin, acc, state, forces):
-        v_rel = kin.pin_velocity - kin.hole_velocity
-        a_rel = acc.pin_acceleration - acc.hole_acceleration
-        target_rate = memory_target_rate(forces.eccentricity, v_rel, a_rel, self.clearance)
-        return self.memory.rate(state, MemoryInput(forces.penetration, forces.aux, target_rate))
+        return memory_state_rate(self, kin, acc, state, forces)
+
+
+def check_dry_pin_in_hole(law) -> None:
+    """Raise [`ParameterError`][jaxcrank.physics.params.ParameterError] for a dry pin-in-hole law's radius
+    that is not positive, a pin not smaller than its hole, or a memory that is not a memory law."""
+    check_range("hole_radius", law.hole_radius, low=0.0, unit="m")
+    check_range("pin_radius", law.pin_radius, low=0.0, unit="m")
+    hole, pin = _concrete(law.hole_radius), _concrete(law.pin_radius)
+    if hole is not None and pin is not None and np.any(pin >= hole):
+        raise ParameterError(
+            f"pin_radius = {np.max(pin):g} m must be smaller than hole_radius = "
+            f"{np.min(hole):g} m (valid range: 0 < pin_radius < hole_radius); "
+            'for a joint without clearance use law = "ideal"'
+        )
+    if not isinstance(law.memory, AbstractMemoryLaw):
+        raise ParameterError(f"memory {law.memory!r} is not a jaxcrank.physics.memory.AbstractMemoryLaw")
+
+
+def memory_state_rate(law, kin, acc, state, forces):
+    """d(state)/dt of a dry pin-in-hole law's approach-speed memory (SI)."""
+    v_rel = kin.pin_velocity - kin.hole_velocity
+    a_rel = acc.pin_acceleration - acc.hole_acceleration
+    target_rate = memory_target_rate(forces.eccentricity, v_rel, a_rel, law.clearance)
+    return law.memory.rate(state, MemoryInput(forces.penetration, forces.aux, target_rate))
 
 
 def clearance_contact(joint: Clearance, kin: JointKinematics, state: Float[ArrayLike, " k"]) -> JointForces:
@@ -294,18 +305,29 @@ def clearance_contact(joint: Clearance, kin: JointKinematics, state: Float[Array
     delta_dot = jnp.dot(n, v_rel)
     v_t = jnp.dot(tangent, v_rel) + kin.pin_angular_velocity * r_p - kin.hole_angular_velocity * r_h
 
+    return contact_forces(joint, kin, state, d, n, n, delta, delta_dot, v_t, (r_h, r_p), (r_h, r_p))
+
+
+def contact_forces(
+    joint, kin: JointKinematics, state, d, n, normal, delta, delta_dot, v_t, radii, levers
+) -> JointForces:
+    """The dry pin-in-hole contact's forces from its geometry at one instant (SI): the normal
+    force of ``joint.contact``'s law at penetration ``delta`` and rate ``delta_dot`` along
+    ``normal``, the friction of ``joint.friction`` at slip ``v_t``; ``radii``: the (hole, pin)
+    radii of curvature the law sees, ``levers``: the (hole, pin) distances from the centres
+    to the contact along ``n``; ``d``: the eccentricity. Shared by the round and the worn joint."""
     c = joint.contact
     compliance = effective_compliance(joint.pin_material.compliance, joint.hole_material.compliance)
     approach = joint.memory.approach_speed(jnp.asarray(state))
-    geometry = dict(hole_radius=r_h, pin_radius=r_p, compliance_sum=compliance, exponent=c.exponent)
+    geometry = dict(hole_radius=radii[0], pin_radius=radii[1], compliance_sum=compliance, exponent=c.exponent)
     f_n, f_el = c.law.normal_force(delta, delta_dot, approach, c.restitution, **geometry)
     fr = joint.friction
     f_t = fr.law.force(v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
     zero = jnp.zeros_like(f_n)
     return JointForces(
-        force=-f_n * n + f_t * tangent,
-        pin_point=kin.pin_position + r_p * n,
-        hole_point=kin.hole_position + r_h * n,
+        force=-f_n * normal + f_t * perp(normal),
+        pin_point=kin.pin_position + levers[1] * n,
+        hole_point=kin.hole_position + levers[0] * n,
         pin_moment=zero,
         hole_moment=zero,
         dissipation=(f_n - f_el) * delta_dot - f_t * v_t,
@@ -315,7 +337,7 @@ def clearance_contact(joint: Clearance, kin: JointKinematics, state: Float[Array
         normal_force=f_n,
         friction_force=f_t,
         slip_speed=v_t,
-        aux=memory_target(d, v_rel, joint.clearance),
+        aux=memory_target(d, kin.pin_velocity - kin.hole_velocity, joint.clearance),
     )
 
 
@@ -360,7 +382,10 @@ __all__ = [
     "JointAccelerations",
     "JointForces",
     "JointKinematics",
+    "check_dry_pin_in_hole",
     "clearance_contact",
+    "contact_forces",
     "joint_state_size",
+    "memory_state_rate",
     "register_joint_law",
 ]

@@ -30,9 +30,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .joints import AbstractPinInHole, JointForces, JointKinematics, register_joint_law
+from .joints import (
+    AbstractPinInHole,
+    JointForces,
+    JointKinematics,
+    check_dry_pin_in_hole,
+    contact_forces,
+    memory_state_rate,
+    register_joint_law,
+)
 from .laws import effective_compliance
-from .memory import AbstractMemoryLaw, ForgettingMemory, MemoryInput, memory_target, memory_target_rate
+from .memory import AbstractMemoryLaw, ForgettingMemory
 from .params import Contact, Friction, Material, ParameterError, _concrete, check_range
 from .safemath import perp, safe_norm
 
@@ -184,16 +192,8 @@ class Worn(AbstractPinInHole):
     pin_wear: Float[Array, " 2M+1"] = eqx.field(default_factory=new_profile, converter=jnp.asarray)
 
     def __check_init__(self):
-        check_range("hole_radius", self.hole_radius, low=0.0, unit="m")
-        check_range("pin_radius", self.pin_radius, low=0.0, unit="m")
-        hole, pin = _concrete(self.hole_radius), _concrete(self.pin_radius)
-        if hole is not None and pin is not None and np.any(pin >= hole):
-            raise ParameterError(
-                f"pin_radius = {np.max(pin):g} m must be smaller than hole_radius = {np.min(hole):g} m "
-                "(valid range: 0 < pin_radius < hole_radius)"
-            )
-        if not isinstance(self.memory, AbstractMemoryLaw):
-            raise ParameterError(f"memory {self.memory!r} is not a jaxcrank.physics.memory.AbstractMemoryLaw")
+        check_dry_pin_in_hole(self)
+        pin = _concrete(self.pin_radius)
         if not isinstance(self.wear, Archard):
             raise ParameterError(f"wear {self.wear!r} is not a jaxcrank.physics.wear.Archard")
         shapes = {np.shape(self.hole_wear)[-1:], np.shape(self.pin_wear)[-1:]}
@@ -217,10 +217,7 @@ class Worn(AbstractPinInHole):
         return worn_contact(self, kin, state)
 
     def state_rate(self, kin, acc, state, forces):
-        v_rel = kin.pin_velocity - kin.hole_velocity
-        a_rel = acc.pin_acceleration - acc.hole_acceleration
-        target_rate = memory_target_rate(forces.eccentricity, v_rel, a_rel, self.clearance)
-        return self.memory.rate(state, MemoryInput(forces.penetration, forces.aux, target_rate))
+        return memory_state_rate(self, kin, acc, state, forces)
 
     def worn(self, hole_wear, pin_wear) -> Worn:
         """This joint with the profiles ``hole_wear`` and ``pin_wear`` (m; traceable)."""
@@ -316,28 +313,8 @@ def worn_contact(joint: Worn, kin: JointKinematics, state) -> JointForces:
     rho_p = r_p - cp.pin.depth - cp.pin.bend
     rho_h = jnp.maximum(rho_h, rho_p + 0.1 * joint.clearance)
 
-    c = joint.contact
-    compliance = effective_compliance(joint.pin_material.compliance, joint.hole_material.compliance)
-    approach = joint.memory.approach_speed(jnp.asarray(state))
-    geometry = dict(hole_radius=rho_h, pin_radius=rho_p, compliance_sum=compliance, exponent=c.exponent)
-    f_n, f_el = c.law.normal_force(delta, delta_dot, approach, c.restitution, **geometry)
-    fr = joint.friction
-    f_t = fr.law.force(v_t, f_n, fr.coefficient, fr.stick_speed, fr.slip_speed)
-    zero = jnp.zeros_like(f_n)
-    return JointForces(
-        force=-f_n * cp.normal + f_t * tangent,
-        pin_point=kin.pin_position + lever_p * n,
-        hole_point=kin.hole_position + lever_h * n,
-        pin_moment=zero,
-        hole_moment=zero,
-        dissipation=(f_n - f_el) * delta_dot - f_t * v_t,
-        elastic_energy=c.law.elastic_energy(delta, **geometry),
-        eccentricity=cp.eccentricity,
-        penetration=delta,
-        normal_force=f_n,
-        friction_force=f_t,
-        slip_speed=v_t,
-        aux=memory_target(cp.eccentricity, v_rel, joint.clearance),
+    return contact_forces(
+        joint, kin, state, cp.eccentricity, n, cp.normal, delta, delta_dot, v_t, (rho_h, rho_p), (lever_h, lever_p)
     )
 
 
