@@ -115,9 +115,8 @@ def wear_per_cycle(mech: Mechanism, options: LifeOptions = LIFE_OPTIONS, warm_st
         LifeError: when the steady state or the wear's solve fails (the message says what to change).
     """
     so = options.steady
-    if (
-        warm_start is None
-    ):  # settle from rest at the wear's looser tolerance first: a start-up in a worn hole is violent
+    # a cold start settles from rest at the wear's looser tolerance first: a start-up in a worn hole is violent
+    if warm_start is None:
         rest = simulate(mech, ts=jnp.array([0.0, so.settle_revolutions * float(mech.period)]), options=options.solve,
                         throw=False)  # fmt: skip
         warm_start = rest.ys[-1].at[-2:].set(0.0) if bool(rest.ok) else None
@@ -144,12 +143,13 @@ def wear_per_cycle(mech: Mechanism, options: LifeOptions = LIFE_OPTIONS, warm_st
             f"the wear's solve failed ({RESULTS[ws.result]}): raise LifeOptions.solve.max_steps or loosen its rtol/atol"
         )
     out, vol, ci = {}, {}, {}
+    per_joint = None if per_rev is None else nw.unpack_wear(mech, jnp.asarray(per_rev))
     for j, w in nw.unpack_wear(mech, total / revolutions).items():
         out[j] = (w.hole, w.pin)
         vol[j] = (float(w.hole_volume), float(w.pin_volume))
-        if per_rev is not None:
-            v = nw.unpack_wear(mech, jnp.asarray(per_rev))[j].hole_volume
-            half = 1.96 * float(np.std(np.asarray(v), ddof=1)) / math.sqrt(len(v))
+        if per_joint is not None:
+            v = np.asarray(per_joint[j].hole_volume)
+            half = 1.96 * float(np.std(v, ddof=1)) / math.sqrt(len(v))
             ci[j] = (float(np.mean(v)) - half, float(np.mean(v)) + half)
     metrics = {k_: float(v) for k_, v in steady.metrics.items()}
     return WearPoint(out, vol, metrics, str(steady.regime), ci, steady)
@@ -183,38 +183,40 @@ class Life:
         """The mechanism with the profiles of point ``i``."""
         return nw.with_profiles(self.mechanism, self.profiles[i])
 
-    def rows(self, grid: int = 720) -> list[dict]:
-        """One dict per point: ``cycles``; per worn joint j, ``<j>_hole_max_depth_m``,
+    def row(self, i: int, grid: int = 720) -> dict:
+        """Point ``i`` as a dict: ``cycles``; per worn joint j, ``<j>_hole_max_depth_m``,
         ``<j>_pin_max_depth_m``, ``<j>_hole_volume_m3``, ``<j>_pin_volume_m3``,
         ``<j>_clearance_m`` (the new clearance plus both deepest wears: the most the
         gap opens) and ``<j>_hole_wear_m3_per_cycle``; ``regime``; the steady state's metrics."""
         angles = jnp.linspace(0.0, 2.0 * math.pi, grid, endpoint=False)
-        out = []
-        for n, prof, point in zip(self.cycles, self.profiles, self.points):
-            row = {"cycles": float(n)}
-            mech = nw.with_profiles(self.mechanism, prof)
-            vols = nw.volumes(mech)
-            for j, (hole, pin) in prof.items():
-                dh = float(jnp.max(profile_on_grid(hole, angles)))
-                dp = float(jnp.max(profile_on_grid(pin, angles)))
-                law = mech.joints[j]
-                row[f"{j}_hole_max_depth_m"] = dh
-                row[f"{j}_pin_max_depth_m"] = dp
-                row[f"{j}_hole_volume_m3"] = float(vols[j][0])
-                row[f"{j}_pin_volume_m3"] = float(vols[j][1])
-                row[f"{j}_clearance_m"] = float(law.clearance) + max(dh, 0.0) + max(dp, 0.0)
-                row[f"{j}_hole_wear_m3_per_cycle"] = point.volume_rate[j][0]
-            row["regime"] = point.regime
-            row.update(point.metrics)
-            out.append(row)
-        return out
+        point = self.points[i]
+        mech = self.mechanism_at(i)
+        vols = nw.volumes(mech)
+        row = {"cycles": float(self.cycles[i])}
+        for j, (hole, pin) in self.profiles[i].items():
+            dh = float(jnp.max(profile_on_grid(hole, angles)))
+            dp = float(jnp.max(profile_on_grid(pin, angles)))
+            row[f"{j}_hole_max_depth_m"] = dh
+            row[f"{j}_pin_max_depth_m"] = dp
+            row[f"{j}_hole_volume_m3"] = float(vols[j][0])
+            row[f"{j}_pin_volume_m3"] = float(vols[j][1])
+            row[f"{j}_clearance_m"] = float(mech.joints[j].clearance) + max(dh, 0.0) + max(dp, 0.0)
+            row[f"{j}_hole_wear_m3_per_cycle"] = point.volume_rate[j][0]
+        row["regime"] = point.regime
+        row.update(point.metrics)
+        return row
+
+    def rows(self, grid: int = 720) -> list[dict]:
+        """[`row`][jaxcrank.analysis.life.Life.row] of every point."""
+        return [self.row(i, grid) for i in range(len(self.cycles))]
 
 
 def _max_depth(profile, angles):
     return jnp.max(jnp.abs(profile_on_grid(profile, angles)))
 
 
-def _advance(profiles, rate, dn):
+def advance(profiles, rate, dn):
+    """Euler's step of the profiles: ``P + dn r`` (traceable; Heun's predictor)."""
     return {j: (h + dn * rate[j][0], p + dn * rate[j][1]) for j, (h, p) in profiles.items()}
 
 
@@ -305,7 +307,7 @@ def life(
                 f"the step in cycles fell below one cycle at {n:g} cycles: the wear changes the motion within a "
                 "cycle; lower the wear coefficients or loosen LifeOptions.rtol"
             )
-        mid = nw.with_profiles(mech, _advance(prof, point.rate, dn))
+        mid = nw.with_profiles(mech, advance(prof, point.rate, dn))
         pred = wear_per_cycle(mid, options, warm_start=point.steady)
         new = heun(prof, point.rate, pred.rate, dn)
         ratio = _error_ratio(new, point.rate, pred.rate, dn, options.rtol, atol, angles)

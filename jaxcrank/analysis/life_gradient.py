@@ -30,7 +30,7 @@ import jax.numpy as jnp
 from ..numerics import wear_run as nw
 from ..numerics.shooting import period_solve
 from ..numerics.steady import SteadyStateError, orbit_start
-from .life import Life, heun
+from .life import Life, advance, heun
 
 
 class LifeTrace(NamedTuple):
@@ -77,7 +77,7 @@ def replay(build, params, run: Life) -> LifeTrace:
     rate, metrics = _at(nw.with_profiles(base, prof), run.points[0].steady)
     metric_rows, profiles = [metrics], [prof]
     for i, dn in enumerate(run.schedule):
-        mid = {j: (h + dn * rate[j][0], p + dn * rate[j][1]) for j, (h, p) in prof.items()}
+        mid = advance(prof, rate, dn)
         r1, _ = _at(nw.with_profiles(base, mid), run.predictors[i].steady)
         prof = heun(prof, rate, r1, dn)
         rate, metrics = _at(nw.with_profiles(base, prof), run.points[i + 1].steady)

@@ -35,18 +35,13 @@ from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
 from ..physics.wear import Worn, wear_rates, worn_volume
 from .results import RESULTS
-from .shooting import STEADY_DEFAULTS
+from .shooting import STEADY_DEFAULTS, lax_solver
 from .solve import SolveOptions, step_size_controller
 
 
 def worn_joints(mech: Mechanism) -> tuple[str, ...]:
     """The names of the joints whose law is [`Worn`][jaxcrank.physics.wear.Worn], sorted (static)."""
     return tuple(sorted(j for j, law in mech.joints.items() if isinstance(law, Worn)))
-
-
-def wear_size(mech: Mechanism) -> int:
-    """Entries of the wear state: per worn joint, both profiles and both volumes (static)."""
-    return sum(2 * (2 * mech.joints[j].modes + 1) + 2 for j in worn_joints(mech))
 
 
 def _layout(mech):
@@ -95,6 +90,13 @@ def profiles_of(mech: Mechanism) -> dict:
     return {j: (mech.joints[j].hole_wear, mech.joints[j].pin_wear) for j in worn_joints(mech)}
 
 
+def _worn_motion(compiled, t, y, joints):
+    """The equations of motion at (t, y) and each worn joint's kinematics from them."""
+    e = terms(compiled, t, y)
+    rots = {b: st.frame.rot for b, st in e.motion.states.items()}
+    return e, {j: joint_motion(compiled, j, e.motion.q, e.motion.qd, rots=rots)[0] for j in joints}
+
+
 def _field(mech, n, feedback):
     base = profiles_of(mech)
     layout = _layout(mech)
@@ -106,11 +108,9 @@ def _field(mech, n, feedback):
         if feedback:
             current = {j: (base[j][0] + w[h], base[j][1] + w[p]) for j, (h, p, _) in layout.items()}
             compiled = eqx.tree_at(lambda m: m.mechanism, compiled, with_profiles(compiled.mechanism, current))
-        e = terms(compiled, t, y)
-        rots = {b: st.frame.rot for b, st in e.motion.states.items()}
+        e, kins = _worn_motion(compiled, t, y, layout)
         rates = []
-        for j in layout:
-            kin, _ = joint_motion(compiled, j, e.motion.q, e.motion.qd, rots=rots)
+        for j, kin in kins.items():
             r = wear_rates(compiled.linkage.joints[j], kin, e.forces[j])
             rates += [r.hole, r.pin, jnp.stack([r.hole_volume, r.pin_volume])]
         return jnp.concatenate([e.state_rate, jnp.concatenate(rates) / scale])
@@ -202,12 +202,9 @@ def wear_solve(
     if ts.ndim != 1 or ts.shape[0] < 2:
         raise ParameterError(f"ts must be 1-D with at least two times; got shape {ts.shape}")
     adjoint = diffrax.ForwardMode() if adjoint is None else adjoint
-    solver = options.solver
-    if hasattr(solver, "scan_kind"):
-        solver = eqx.tree_at(lambda s: s.scan_kind, solver, "lax", is_leaf=lambda x: x is None)
     return _wear_solve(
-        mech, jnp.asarray(y0, dtype=float), ts, solver, options.rtol, options.atol, options.dt0, options.max_steps,
-        adjoint, feedback,
+        mech, jnp.asarray(y0, dtype=float), ts, lax_solver(options), options.rtol, options.atol, options.dt0,
+        options.max_steps, adjoint, feedback,
     )  # fmt: skip
 
 
@@ -222,11 +219,9 @@ def contact_samples(mech: Mechanism, ts: Float[Array, " n"], ys: Float[Array, "n
     compiled = model.compile_model(mech)
 
     def one(t, y):
-        e = terms(compiled, t, y)
-        rots = {b: st.frame.rot for b, st in e.motion.states.items()}
+        e, kins = _worn_motion(compiled, t, y, worn_joints(mech))
         out = {}
-        for j in worn_joints(mech):
-            kin, _ = joint_motion(compiled, j, e.motion.q, e.motion.qd, rots=rots)
+        for j, kin in kins.items():
             cp = contact_point(compiled.linkage.joints[j], kin)
             f = e.forces[j]
             out[j] = {
@@ -260,7 +255,6 @@ __all__ = [
     "profiles_of",
     "unpack_wear",
     "volumes",
-    "wear_size",
     "wear_solve",
     "with_profiles",
     "worn_joints",

@@ -95,13 +95,17 @@ def profile_rows(cycles, profiles) -> list[dict]:
     return out
 
 
+def _plain_profiles(profiles) -> dict:
+    """A point's profiles, ``joint -> [hole, pin]``, as lists of numbers (m)."""
+    return {j: [[float(x) for x in h], [float(x) for x in p]] for j, (h, p) in profiles.items()}
+
+
 def _checkpoint(out: Path, run, rows, section_state=None) -> None:
+    """Write the run so far (its profiles already plain lists) to ``out/checkpoint.json``, atomically."""
     data = {
         "section_state": None if section_state is None else [float(v) for v in section_state],
         "cycles": [float(c) for c in run.cycles],
-        "profiles": [
-            {j: [list(map(float, h)), list(map(float, p))] for j, (h, p) in pr.items()} for pr in run.profiles
-        ],
+        "profiles": run.profiles,
         "schedule": [float(s) for s in run.schedule],
         "rejected": int(run.rejected),
         "rows": rows,
@@ -166,12 +170,13 @@ def run(args) -> int:
     else:
         prior = ([], [], [], 0)
 
+    fresh: list[dict] = []  # this process's rows: each point's row is made once
+
     def on_point(r):
-        rows = done_rows + r.rows()
+        fresh.extend(r.row(i) for i in range(len(fresh), len(r.cycles)))
+        rows = done_rows + fresh
         cycles = prior[0] + list(r.cycles)
-        profiles = prior[1] + [
-            {j: [list(map(float, h)), list(map(float, p))] for j, (h, p) in pr.items()} for pr in r.profiles
-        ]
+        profiles = prior[1] + [_plain_profiles(pr) for pr in r.profiles]
         schedule = prior[2] + list(r.schedule[1:] if resume is not None else r.schedule)
         full = lf.Life(mech, cycles, profiles, [], [], schedule, prior[3] + r.rejected, options)
         _checkpoint(out, full, rows, r.points[-1].steady.section_state)

@@ -102,7 +102,7 @@ def metrics_figure(rows, joints, path: Path) -> Path:
     return path
 
 
-def contact_arcs_figure(mech, steady, rate, path: Path, revolutions: int = 1) -> Path:
+def contact_arcs_figure(mech, steady, rate, path: Path) -> Path:
     """Where the wear falls: per worn joint, the orbit's wear power (normal force times
     slip, W) at the contact's angle in the hole's frame, summed over 5 degree bins per
     cycle (J per degree), beside the hole's wear depth per cycle (m) from Archard's law."""
