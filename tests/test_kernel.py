@@ -20,6 +20,7 @@ from jaxcrank.numerics import results
 from jaxcrank.numerics import solve as solve_module
 from jaxcrank.numerics.kernel import build, engine, gpu, source
 from jaxcrank.physics import catalogue, laws, model, presets
+from jaxcrank.physics.params import ParameterError
 
 pytestmark = pytest.mark.skipif(not engine.available(), reason="no C compiler")
 
@@ -526,3 +527,15 @@ def test_gpu_bench_runs_with_the_host_standing_in(tmp_path, monkeypatch):
     assert 0 < result["gpu_fp64_fraction_of_peak"] < 1
     assert {r["engine"] for r in result["gpu_runs"]} == {"kernel", "xla"}
     assert (tmp_path / "ensemble_gpu.png").stat().st_size > 0
+
+
+def test_a_worn_mechanism_goes_to_xla_and_the_kernel_refuses_it_by_name():
+    """A worn joint's profiles are arrays, which the kernel's scalar parameters cannot
+    hold: the default engine of its sweep is XLA, and asking for the kernel says why."""
+    from jaxcrank.runs import engines
+
+    worn = catalogue.paper_wear()
+    assert not engines.kernel_takes(worn) and engines.kernel_takes(jc.paper())
+    assert engines.default_engine(mechanism=worn) == "xla"
+    with pytest.raises(ParameterError, match="scalar parameters only"):
+        engines.check("kernel", None, 1, worn)

@@ -134,7 +134,7 @@ def run_sweep(args) -> int:
         (out / "spec.toml").write_text(args.spec.read_text())
     start = time.perf_counter()
     distributed = bool(args.distributed or args.coordinator)
-    engine = engines.resolve(args.engine, spec.settings, args.workers, distributed, out, args.resume)
+    engine = engines.resolve(args.engine, spec.settings, args.workers, distributed, out, args.resume, spec.base)
     # the chunk this sweep uses (on a GPU derived from its free memory), reported below
     chunk = spec.chunk if spec.chunk is not None or engine == "xla" else engines.default_chunk()
     chunk = sweep.resolve_chunk(spec.base, spec.names, spec.settings, chunk)

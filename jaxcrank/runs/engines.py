@@ -30,10 +30,21 @@ def kernel_available() -> bool:
     return engine.available()
 
 
-def default_engine(settings=None, workers: int = 1, distributed: bool = False) -> str:
+def kernel_takes(mechanism) -> bool:
+    """Whether every parameter of ``mechanism`` is a scalar, as the kernel's are (a worn
+    joint's profiles are arrays)."""
+    import jax
+    import numpy as np
+
+    return all(np.ndim(leaf) == 0 for leaf in jax.tree_util.tree_leaves(mechanism))
+
+
+def default_engine(settings=None, workers: int = 1, distributed: bool = False, mechanism=None) -> str:
     """``"kernel"`` where it can run the sweep (a C compiler, the tsit5 solver, one
-    process: no ``workers`` and no ``jax.distributed`` job), else ``"xla"``."""
+    process: no ``workers`` and no ``jax.distributed`` job, and a ``mechanism`` whose
+    parameters are all scalars), else ``"xla"``."""
     fits = (settings is None or settings.options.solver_name == "tsit5") and int(workers) == 1 and not distributed
+    fits = fits and (mechanism is None or kernel_takes(mechanism))
     return "kernel" if fits and kernel_available() else "xla"
 
 
@@ -48,7 +59,13 @@ def recorded(out) -> str | None:
 
 
 def resolve(
-    engine: str | None, settings=None, workers: int = 1, distributed: bool = False, out=None, resume: bool = False
+    engine: str | None,
+    settings=None,
+    workers: int = 1,
+    distributed: bool = False,
+    out=None,
+    resume: bool = False,
+    mechanism=None,
 ) -> str:
     """The engine a sweep runs with: ``engine`` when given, else, resuming the sweep in
     ``out``, the engine it was started with, else [`default_engine`][jaxcrank.runs.engines.default_engine].
@@ -58,7 +75,7 @@ def resolve(
     """
     before = recorded(out) if (out is not None and resume) else None
     if engine is None:
-        return before or default_engine(settings, workers, distributed)
+        return before or default_engine(settings, workers, distributed, mechanism)
     if before is not None and engine != before:
         raise ParameterError(
             f"engine = {engine!r}: the sweep in {out} was started with engine {before!r} (its {ENGINE_FILE}); "
@@ -74,14 +91,18 @@ def default_chunk() -> int:
     return 16 * engine.default_threads()
 
 
-def check(engine: str, settings, workers: int) -> None:
+def check(engine: str, settings, workers: int, mechanism=None) -> None:
     """Raise [`ParameterError`][jaxcrank.physics.params.ParameterError] for an unknown engine, or a kernel sweep with a
-    solver other than tsit5, several worker processes, a ``jax.distributed`` job or no
-    C compiler."""
+    solver other than tsit5, several worker processes, a ``jax.distributed`` job, no
+    C compiler, or a ``mechanism`` with a parameter that is not a scalar."""
     if engine not in ENGINES:
         raise ParameterError(f"engine = {engine!r} is unknown; valid: {', '.join(ENGINES)}")
     if engine != "kernel":
         return
+    if mechanism is not None and not kernel_takes(mechanism):
+        raise ParameterError(
+            "the kernel engine takes scalar parameters only (a worn joint's profiles are arrays): use xla"
+        )
     if settings.options.solver_name != "tsit5":
         raise ParameterError(
             f"the kernel engine solves with tsit5 only, not solver = {settings.options.solver_name!r}: use xla"

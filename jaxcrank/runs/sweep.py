@@ -178,8 +178,8 @@ def run(
     from . import engines
 
     settings = SweepSettings() if settings is None else settings
-    engine = engines.resolve(engine, settings, workers, jax.process_count() > 1, out, resume)
-    engines.check(engine, settings, workers)
+    engine = engines.resolve(engine, settings, workers, jax.process_count() > 1, out, resume, base)
+    engines.check(engine, settings, workers, base)
     names = list(names)
     designs = np.atleast_2d(np.asarray(designs, dtype=float))
     if designs.shape[1] != len(names):
