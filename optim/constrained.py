@@ -12,7 +12,8 @@ limit strictly feasible). The augmented Lagrangian (Powell-Hestenes-Rockafellar)
 
 is minimised by [`optim.optimize.optimize`][] from the last round's design (its regime guard,
 checkpoints and history as for any problem); then ``lambda_j <- max(0, lambda_j + mu g_j)``,
-and ``mu`` grows tenfold when the largest violation did not fall to a quarter. Every value and
+and ``mu`` grows tenfold when the largest violation did not fall to a quarter of the last round's
+(the first round: of the start's). Every value and
 gradient comes from one compiled program per orbit structure
 ([`QuantityEvaluator`][optim.constrained.QuantityEvaluator]): the problem's outputs and their
 Jacobian, by the implicit function theorem at the orbit, so a round's new multipliers cost no
@@ -255,6 +256,20 @@ class QuantityEvaluator(SteadyEvaluator):
         }
 
 
+def next_penalty(mu: float, worst: float, before: float, growth: float) -> float:
+    """The next round's penalty: ``mu * growth`` when the round's largest scaled violation
+    ``worst`` is positive and did not fall to a quarter of ``before`` (the last round's, or the
+    start's after the first round), else ``mu``."""
+    return mu * growth if worst > 0.0 and worst > 0.25 * before else mu
+
+
+def _worst(problem: DesignProblem, ev: QuantityEvaluator, x) -> float:
+    """The largest scaled violation at SI design ``x`` (0 when every constraint holds; inf where an
+    output is not finite)."""
+    g, _ = inequalities(problem, problem.split(ev.outputs_at(np.asarray(x, dtype=float)))[2])
+    return float(np.max(g, initial=0.0)) if np.all(np.isfinite(g)) else math.inf
+
+
 def report_terms(problem: DesignProblem, outputs) -> dict:
     """``objectives`` and ``constraints`` of an outputs vector: each with ``quantity``, ``value``,
     ``lower``, ``upper`` and ``satisfied`` (objectives: ``weight``, no bounds); and ``f``."""
@@ -349,9 +364,9 @@ def solve(
         x_new = np.asarray(res["final"], dtype=float)
         g, _ = inequalities(problem, problem.split(ev.outputs_at(x_new))[2])
         worst = float(np.max(g)) if g.size else 0.0
-        before = state["rounds"][-1]["max_violation"] if state["rounds"] else math.inf
+        before = state["rounds"][-1]["max_violation"] if state["rounds"] else _worst(problem, ev, state["start"])
         lam = np.maximum(0.0, lam + mu * (g + MARGIN)) if g.size else lam
-        mu_next = mu * rounds.growth if worst > 0.0 and worst > 0.25 * before else mu
+        mu_next = next_penalty(mu, worst, before, rounds.growth)
         moved = float(np.max(np.abs(np.asarray(problem.to_unit(x_new)) - np.asarray(problem.to_unit(x)))))
         state["rounds"].append(
             {

@@ -531,11 +531,15 @@ def test_gpu_bench_runs_with_the_host_standing_in(tmp_path, monkeypatch):
 
 def test_a_worn_mechanism_goes_to_xla_and_the_kernel_refuses_it_by_name():
     """A worn joint's profiles are arrays, which the kernel's scalar parameters cannot
-    hold: the default engine of its sweep is XLA, and asking for the kernel says why."""
-    from jaxcrank.runs import engines
+    hold: the default engine of its sweep and of its regime map is XLA, and asking for the
+    kernel says why."""
+    from jaxcrank.runs import engines, regimes
 
     worn = catalogue.paper_wear()
     assert not engines.kernel_takes(worn) and engines.kernel_takes(jc.paper())
     assert engines.default_engine(mechanism=worn) == "xla"
+    assert regimes.resolve_engine(None, mechanism=worn) == "xla"
     with pytest.raises(ParameterError, match="scalar parameters only"):
         engines.check("kernel", None, 1, worn)
+    with pytest.raises(ParameterError, match="scalar parameters only"):
+        regimes.resolve_engine("kernel", mechanism=worn)

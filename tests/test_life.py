@@ -35,7 +35,8 @@ def _stand_in(mech, options=lf.LIFE_OPTIONS, warm_start=None):
         rate[j] = (A + B * hole, 0.1 * (A + B * pin))
         vol[j] = (float(rate[j][0][0]), float(rate[j][1][0]))
     metrics = {"deepest_hole_B_m": float(jnp.max(jnp.abs(nw.profiles_of(mech)["B"][0])))}
-    return lf.WearPoint(rate, vol, metrics, "periodic", {}, _Steady())
+    ci = {"B": (0.9 * vol["B"][0], 1.1 * vol["B"][0])}  # as if B's rate were averaged; C's is exact
+    return lf.WearPoint(rate, vol, metrics, "periodic", ci, _Steady())
 
 
 def _exact(n):
@@ -91,6 +92,11 @@ def test_rows_have_units_and_every_point_is_reported(stand_in):
         )
         volume = 2 * math.pi * float(law.hole_radius) * float(law.wear.length) * _exact(1e5)
         assert row[f"{j}_hole_volume_m3"] == pytest.approx(volume, rel=0.01)
+    rate = row["B_hole_wear_m3_per_cycle"]
+    band = (row["B_hole_wear_m3_per_cycle_ci95_low"], row["B_hole_wear_m3_per_cycle_ci95_high"])
+    assert band == (0.9 * rate, 1.1 * rate)
+    rate = row["C_hole_wear_m3_per_cycle"]
+    assert row["C_hole_wear_m3_per_cycle_ci95_low"] == row["C_hole_wear_m3_per_cycle_ci95_high"] == rate
 
 
 def test_bad_life_arguments_name_the_parameter(stand_in):

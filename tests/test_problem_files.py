@@ -213,6 +213,16 @@ def test_the_augmented_lagrangian_gradient_is_its_derivative():
     assert constrained.satisfied(p, np.array([41.5, 0.075])) == [True, False]
 
 
+def test_the_penalty_grows_when_a_round_leaves_too_much_violation_the_first_against_the_start():
+    """The first round is measured against the start's violation: a start that violates a
+    bound by 0.10 and a first round that leaves 0.04 (more than a quarter) raise the penalty
+    for the second round; a round that holds every bound, or quarters the violation, keeps it."""
+    assert constrained.next_penalty(10.0, 0.04, 0.10, 10.0) == 100.0
+    assert constrained.next_penalty(10.0, 0.02, 0.10, 10.0) == 10.0
+    assert constrained.next_penalty(10.0, -0.003, 0.10, 10.0) == 10.0
+    assert constrained.next_penalty(10.0, 0.04, math.inf, 10.0) == 10.0  # a start without finite outputs
+
+
 def test_the_docs_problem_file_parses():
     """The docs page's problem file (run end to end by the slow test) is a valid problem on a
     written-out linkage, with an objective other than Eq. 19, kinematic and metric constraints."""

@@ -97,7 +97,10 @@ LIFE_OPTIONS = LifeOptions()
 class WearPoint:
     """The wear at one geometry (SI): per worn joint, the profiles' rates ``(hole, pin)``
     (m per cycle, Fourier coefficients) and the volumes' ``(hole, pin)`` (m^3 per cycle);
-    the steady state's metrics (units in the names), its regime and the steady state."""
+    where the motion is not periodic, ``volume_ci95[joint]``: the 95 % confidence interval
+    ``(low, high)`` of the hole's volume rate over the averaged revolutions (m^3 per cycle;
+    empty for a periodic orbit, whose rate is exact); the steady state's metrics (units in
+    the names), its regime and the steady state."""
 
     rate: dict
     volume_rate: dict
@@ -187,7 +190,9 @@ class Life:
         """Point ``i`` as a dict: ``cycles``; per worn joint j, ``<j>_hole_max_depth_m``,
         ``<j>_pin_max_depth_m``, ``<j>_hole_volume_m3``, ``<j>_pin_volume_m3``,
         ``<j>_clearance_m`` (the new clearance plus both deepest wears: the most the
-        gap opens) and ``<j>_hole_wear_m3_per_cycle``; ``regime``; the steady state's metrics."""
+        gap opens), ``<j>_hole_wear_m3_per_cycle`` and its 95 % confidence interval over the averaged
+        revolutions where the motion is not periodic (``..._ci95_low``, ``..._ci95_high``; a periodic
+        orbit's rate is exact: both are the rate); ``regime``; the steady state's metrics."""
         angles = jnp.linspace(0.0, 2.0 * math.pi, grid, endpoint=False)
         point = self.points[i]
         mech = self.mechanism_at(i)
@@ -202,6 +207,8 @@ class Life:
             row[f"{j}_pin_volume_m3"] = float(vols[j][1])
             row[f"{j}_clearance_m"] = float(mech.joints[j].clearance) + max(dh, 0.0) + max(dp, 0.0)
             row[f"{j}_hole_wear_m3_per_cycle"] = point.volume_rate[j][0]
+            low, high = point.volume_ci95.get(j, (point.volume_rate[j][0],) * 2)
+            row[f"{j}_hole_wear_m3_per_cycle_ci95_low"], row[f"{j}_hole_wear_m3_per_cycle_ci95_high"] = low, high
         row["regime"] = point.regime
         row.update(point.metrics)
         return row

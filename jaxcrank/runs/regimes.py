@@ -115,20 +115,24 @@ def _check(settle_revolutions, max_period, recurrence_tol, options, chunk):
         raise ParameterError(f"chunk = {chunk!r} must be an integer >= 1 (or None for the default)")
 
 
-def resolve_engine(engine: str | None, options: SolveOptions = STEADY_DEFAULTS, out=None, resume: bool = False) -> str:
+def resolve_engine(
+    engine: str | None, options: SolveOptions = STEADY_DEFAULTS, out=None, resume: bool = False, mechanism=None
+) -> str:
     """``"kernel"`` or ``"xla"`` for ``engine`` ([`jaxcrank.runs.engines.resolve`][]: ``None``
     is the engine a resumed run in ``out`` was started with, else the kernel where a C
-    compiler is available and the solver is tsit5).
+    compiler is available, the solver is tsit5 and every parameter of ``mechanism`` is a
+    scalar; a worn joint's profiles are not).
 
     Raises:
-        ParameterError: for an unknown engine, the kernel with another solver or no C
-            compiler, or a resumed run that was started with the other engine.
+        ParameterError: for an unknown engine, the kernel with another solver, no C
+            compiler or a mechanism with array parameters, or a resumed run that was started
+            with the other engine.
     """
     from . import engines
 
     settings = types.SimpleNamespace(options=options)
-    engine = engines.resolve(engine, settings, 1, False, out, resume)
-    engines.check(engine, settings, 1)
+    engine = engines.resolve(engine, settings, 1, False, out, resume, mechanism)
+    engines.check(engine, settings, 1, mechanism)
     return engine
 
 
@@ -252,7 +256,7 @@ def classify(
             corrupted or from other designs.
     """
     _check(settle_revolutions, max_period, recurrence_tol, options, chunk)
-    engine = resolve_engine(engine, options, out, resume)
+    engine = resolve_engine(engine, options, out, resume, base)
     names = list(names)
     designs = np.atleast_2d(np.asarray(designs, dtype=float))
     if designs.ndim != 2 or designs.shape[1] != len(names):

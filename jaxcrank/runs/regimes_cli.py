@@ -153,7 +153,7 @@ def run(args) -> int:
     options = options.replace(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     if args.threads is not None and args.threads < 1:
         raise ParameterError(f"--threads = {args.threads} must be >= 1")
-    engine = regimes.resolve_engine(args.engine, options, args.out, args.resume)
+    engine = regimes.resolve_engine(args.engine, options, args.out, args.resume, spec.base)
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     (out / "spec.toml").write_text(args.spec.read_text())
