@@ -10,6 +10,7 @@ import math
 import subprocess
 import sys
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -106,6 +107,69 @@ def test_bad_life_arguments_name_the_parameter(stand_in):
         lf.LifeOptions(rtol=0.0)
     with pytest.raises(ParameterError, match="average_revolutions"):
         lf.LifeOptions(average_revolutions=1)
+
+
+def _nonlinear(mech, hole, pin, j, xp):
+    """A stand-in wear rate that depends on the design (each hole's wear coefficient) and
+    nonlinearly on the profiles: kappa A + B P + G P^2 per coefficient (m per cycle)."""
+    kappa = mech.joints[j].wear.hole_coefficient / 1e-6
+    return kappa * A + B * hole - hole**2, 0.1 * (kappa * A + B * pin)
+
+
+def _nonlinear_at(mech, steady):
+    """``life_gradient._at``'s stand-in: the rates above and a metric of the profiles (traceable)."""
+    profiles = nw.profiles_of(mech)
+    rate = {j: _nonlinear(mech, h, p, j, jnp) for j, (h, p) in profiles.items()}
+    metric = 1e12 * sum(jnp.sum(h**2) + jnp.sum(p**2) for h, p in profiles.values())
+    return rate, {"wear_metric_um2": metric}
+
+
+def _nonlinear_point(mech, options=lf.LIFE_OPTIONS, warm_start=None):
+    rate, metrics = _nonlinear_at(mech, None)
+    vol = {j: (float(r[0][0]), float(r[1][0])) for j, r in rate.items()}
+    return lf.WearPoint(rate, vol, {k: float(v) for k, v in metrics.items()}, "periodic", {}, _Steady())
+
+
+def test_the_life_gradient_chains_the_steps_as_central_differences_of_whole_runs(monkeypatch):
+    """Through Heun's steps at a run's schedule, the forward-mode gradient of a metric after
+    N cycles and of the cycles to its limit, with respect to both holes' wear coefficients,
+    equals central differences of whole life runs at that schedule (a stand-in for each
+    point's orbit, nonlinear in the profiles and the design; the orbits' own derivatives are
+    checked in tests/test_wear.py and bench/life_gradients.py)."""
+    from jaxcrank.analysis import life_gradient as lg
+
+    monkeypatch.setattr(lf, "wear_per_cycle", _nonlinear_point)
+    monkeypatch.setattr(lg, "_at", _nonlinear_at)
+    base = jc.preset("paper-wear")
+    k0 = jnp.asarray([1e-6, 1e-6])
+
+    def build(u):
+        mech = base
+        for i, j in enumerate(("B", "C")):
+            mech = eqx.tree_at(lambda m, j=j: m.joints[j].wear.hole_coefficient, mech, k0[i] * (1.0 + u[i]))
+        return mech
+
+    u0 = jnp.asarray([0.1, -0.2])
+    run = lf.life(build(u0), 3e5, lf.LifeOptions(rtol=0.05))
+    assert len(run.schedule) >= 3
+    values = [p.metrics["wear_metric_um2"] for p in run.points]
+    limit, index = 0.5 * values[-1], lf.crossing_index(values, 0.5 * values[-1])
+
+    def both(tr):
+        m = tr.metrics["wear_metric_um2"]
+        return jnp.stack([m[-1], lf.cycles_to_limit(tr.cycles, m, limit, index=index)])
+
+    value, jac = lg.life_value_and_grad(both, build, u0, run)
+    assert float(value[0]) == pytest.approx(values[-1], rel=1e-12)
+    h = 1e-5
+    for k in range(2):
+        pair = []
+        for sign in (1.0, -1.0):
+            r = lf.life(build(u0.at[k].add(sign * h)), 3e5, schedule=run.schedule)
+            v = [p.metrics["wear_metric_um2"] for p in r.points]
+            pair.append(np.array([v[-1], float(lf.cycles_to_limit(r.cycles, v, limit, index=index))]))
+        fd = (pair[0] - pair[1]) / (2 * h)
+        np.testing.assert_allclose(np.asarray(jac)[:, k], fd, rtol=1e-6)
 
 
 # --------------------------------------------------------------------------- the real thing, slow

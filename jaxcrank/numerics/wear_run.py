@@ -44,6 +44,27 @@ def worn_joints(mech: Mechanism) -> tuple[str, ...]:
     return tuple(sorted(j for j, law in mech.joints.items() if isinstance(law, Worn)))
 
 
+def with_wear(mech: Mechanism, joints, where: str = "wear") -> Mechanism:
+    """``mech`` with each of ``joints`` (names of dry revolute clearance joints) made a new
+    [`Worn`][jaxcrank.physics.wear.Worn] joint ([`from_clearance`][jaxcrank.physics.wear.from_clearance],
+    the default [`Archard`][jaxcrank.physics.wear.Archard] law, or the joint's own when it is worn already).
+
+    Raises:
+        ParameterError: naming ``where``, for a joint ``mech`` does not have or one that is not a
+            dry revolute clearance joint."""
+    from ..physics.wear import from_clearance
+
+    for j in joints:
+        if j not in mech.joints:
+            raise ParameterError(f"{where}: unknown joint {j!r}; joints: {', '.join(sorted(mech.joints))}")
+        try:
+            law = from_clearance(mech.joints[j])
+        except ParameterError as err:
+            raise ParameterError(f"{where}: joint {j!r}: {err}") from None
+        mech = eqx.tree_at(lambda m, j=j: m.joints[j], mech, law)
+    return mech
+
+
 def _layout(mech):
     out, start = {}, 0
     for j in worn_joints(mech):
@@ -257,5 +278,6 @@ __all__ = [
     "volumes",
     "wear_solve",
     "with_profiles",
+    "with_wear",
     "worn_joints",
 ]

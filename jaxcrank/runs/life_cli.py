@@ -50,17 +50,9 @@ def add_arguments(p):
 
 
 def _with_wear(mech, joints: str | None):
-    if not joints:
-        return mech
-    import equinox as eqx
+    from ..numerics.wear_run import with_wear
 
-    from ..physics.wear import from_clearance
-
-    for j in [s.strip() for s in joints.split(",") if s.strip()]:
-        if j not in mech.joints:
-            raise ParameterError(f"--wear: unknown joint {j!r}; joints: {', '.join(sorted(mech.joints))}")
-        mech = eqx.tree_at(lambda m, j=j: m.joints[j], mech, from_clearance(mech.joints[j]))
-    return mech
+    return with_wear(mech, [s.strip() for s in (joints or "").split(",") if s.strip()], where="--wear")
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:
