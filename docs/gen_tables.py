@@ -965,6 +965,94 @@ def table_paper_wear() -> str:
     return table(head, rows) + note + source("paper_wear")
 
 
+def table_life_gradients() -> str:
+    """Exact life gradients against central differences of whole life runs, per design."""
+    d = results("life_gradients")
+    rows = []
+    for r in d["designs"]:
+        rows.append([
+            ", ".join(f"{u:+g}" for u in r["design_u"]), " + ".join(f"{s:g}" for s in r["steps_cycles"]),
+            f"{max(r['leading_multipliers']):.3f}",
+            " ".join(f"{g:.5g}" for g in r["gradient_metric"]),
+            " ".join(f"{g:.5g}" for g in r["central_difference_metric"]),
+            f"{100 * r['relative_error_metric']:.3f} %",
+            " ".join(f"{g:.5g}" for g in r["gradient_life_cycles"]),
+            " ".join(f"{g:.5g}" for g in r["central_difference_life_cycles"]),
+            f"{100 * r['relative_error_life']:.3f} %", "yes" if r.get("difference_runs_periodic") else "no",
+        ])  # fmt: skip
+    head = ["design u", "steps [cycles]", "largest multiplier", f"d {d['metric']} / du", "central difference",
+            "error", "d life / du [cycles]", "central difference", "error", "differences periodic"]  # fmt: skip
+    return (
+        table(head, rows)
+        + f"\n*u: {'; '.join(d['variables'])}. Life: {d['life']}. Central differences of step {d['step']:g} in u at "
+        "the centre's steps in cycles; error: the difference's norm over the central difference's; largest "
+        "multiplier: the largest leading Floquet multiplier over the run's points.*\n" + source("life_gradients")
+    )
+
+
+def table_life_design() -> str:
+    """Design for life against design for a new clearance, scored on held-out life runs; and the
+    life evaluator's gradients against central differences."""
+    d = results("life_design")
+    qs = d["quantities"]
+    labels = {
+        "start": "start",
+        "for_new_clearance": "for a new clearance",
+        "for_new_clearance_twice_the_iterations": "for a new clearance, twice the iterations",
+        "for_life_from_start": "for life from the start",
+        "for_life": "for life (from the new-clearance design)",
+    }
+    rows = []
+    for name, label in labels.items():
+        h = d["held_out"][name]
+        rows.append([label, ", ".join(f"{v:.4g}" for v in h["design_SI"]),
+                     *[f"{fmt(h['new'][q])} -> {fmt(h['after_cycles'][q])}" for q in qs],
+                     ", ".join(sorted(set(h["regimes"])))])  # fmt: skip
+    head = ["design", f"{', '.join(d['names'])} (SI)", *[f"{q}: new -> after {d['cycles']:g} cycles" for q in qs],
+            "regimes"]  # fmt: skip
+    grads = []
+    for name, c in d["gradient_checks"].items():
+        label = labels[name]
+        for q, g in c["quantities"].items():
+            periodic = "yes" if c["difference_runs_periodic"] else "no"
+            grads.append([label, q, " ".join(f"{v:.5g}" for v in g["gradient_per_SI"]),
+                          " ".join(f"{v:.5g}" for v in g["central_difference_per_SI"]),
+                          f"{100 * g['relative_error']:.3f} %", periodic])  # fmt: skip
+    ghead = ["design", "quantity after the cycles", "exact gradient (per SI unit)", "central difference", "error",
+             "differences periodic"]  # fmt: skip
+    return (
+        table(head, rows) + f"\n*Held out: a fresh life run of each design from rest, steps by error control at rtol "
+        f"{d['held_out_rtol']:g}. After {d['cycles']:g} cycles the design for life's {d['metric']} is lower than the "
+        f"design for a new clearance's by {100 * d['life_design_lower_by']:.1f} % (by "
+        f"{100 * d['life_design_lower_than_twice_the_iterations_by']:.1f} % with twice the iterations); the life run "
+        f"alone from the start ends {abs(100 * d['life_alone_lower_by']):.1f} % "
+        f"{'lower' if d['life_alone_lower_by'] > 0 else 'higher'} than the new-clearance design.*\n\n"
+        + table(ghead, grads)
+        + f"\n*The evaluator's gradients; central differences of relative step {d['gradient_step_relative']:g} at "
+        "the evaluator's steps in cycles; error: norm of the difference over the central difference's, per "
+        "relative change of each variable.*\n" + source("life_design")
+    )
+
+
+def table_life_design_steps() -> str:
+    """The life evaluator's derivative at the design for life against differences of several steps."""
+    d = results("life_design_steps")
+    qs = d["quantities"]
+    rows = [["exact", *[f"{v:.5g}" for v in d["exact_per_SI"]], "", ""]]
+    for r in d["differences"]:
+        fd = r["central_difference_per_SI"]
+        errors = [abs(f - e) / abs(e) for f, e in zip(fd, d["exact_per_SI"])]
+        rows.append([f"central difference, step {r['relative_step']:g}", *[f"{v:.5g}" for v in fd],
+                     " / ".join(f"{100 * e:.1f} %" for e in errors), "yes" if r["periodic"] else "no"])  # fmt: skip
+    head = ["", *[f"d {q} / d {d['variable']}" for q in qs], "difference from exact", "periodic"]
+    return (
+        table(head, rows)
+        + f"\n*At {d['variable']} = {d['design_SI'][1]:.5g} (SI), the design for life; leading multipliers of the "
+        f"run's points and predictor: {', '.join(f'{m:.2f}' for m in d['leading_multipliers'])}.*\n"
+        + source("life_design_steps")
+    )
+
+
 TABLES = {
     "animate": table_animate,
     "compile": table_compile,
@@ -987,6 +1075,9 @@ TABLES = {
     "calibration_bench": table_calibration_bench,
     "life_validation": table_life_validation,
     "paper_wear": table_paper_wear,
+    "life_gradients": table_life_gradients,
+    "life_design": table_life_design,
+    "life_design_steps": table_life_design_steps,
     "headline": headline,
 }
 

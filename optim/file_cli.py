@@ -71,7 +71,13 @@ def run(args) -> int:
     _prepare(args, path, out)
     if not args.quiet:
         print(f"optimize: {problem.description}: classifying starts (compiling on a first run)", file=sys.stderr)
-    res = constrained.solve(problem, opt, rounds, out=out, resume=args.resume, progress=not args.quiet)
+    life = tables.get("life")
+    if life is not None:  # the quantities after life.cycles of wear
+        from .life_design import solve_for_life
+
+        res = solve_for_life(problem, life, opt, rounds, out=out, resume=args.resume, progress=not args.quiet)
+    else:
+        res = constrained.solve(problem, opt, rounds, out=out, resume=args.resume, progress=not args.quiet)
     write_history(out / "history.csv", res["history"])
     plot_history(problem, res["history"], out / "history.png")
     start, final = res["start"], res["final"]
@@ -95,6 +101,14 @@ def run(args) -> int:
         "start_search": res["start_search"],
         "seconds": res["seconds"],
     }
+    if life is not None:
+        first = res["new_clearance"]
+        result["life"] = {
+            "cycles": life.cycles,
+            "rtol": life.rtol,
+            "steps_cycles": res["evaluator"].schedule,
+            "new_clearance_design_SI": None if first is None else first["final_design"],
+        }
     (out / "result.json").write_text(json.dumps(result, indent=2))
     print(f"{problem.description}: objective {start['objective']:.6g} -> {final['objective']:.6g}")
     for c in result["constraints"]:

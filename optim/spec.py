@@ -39,27 +39,91 @@ TABLES = (
     "solver",
     "optimizer",
     "pareto",
+    "life",
 )
+
+
+@dataclasses.dataclass(frozen=True)
+class LifeSpec:
+    """A problem file's ``[life]`` table: measure the quantities after ``cycles`` crank revolutions
+    of wear ([`optim.life_design`][]).
+
+    Attributes:
+        cycles: crank revolutions of wear before the quantities are read, > 0.
+        rtol: the life run's step error relative to the deepest wear, > 0
+            ([`jaxcrank.analysis.life.LifeOptions`][]); the first design's steps serve every design.
+        wear: joints made worn (new, the default Archard law) before the variables are read; a
+            joint whose law is ``"worn"`` in the mechanism wears as it is given.
+        average_revolutions: where a point's motion is not periodic, the revolutions its wear is
+            averaged over, >= 2.
+        start_from_new: design for a new clearance first (the steady state: cheap) and for life
+            from that design ([`optim.life_design.solve_for_life`][]); False: for life from the start.
+
+    Raises:
+        ParameterError: naming the key, for a value out of its range.
+    """
+
+    cycles: float
+    rtol: float = 0.05
+    wear: tuple[str, ...] = ()
+    average_revolutions: int = 10
+    start_from_new: bool = True
+
+    def __post_init__(self):
+        if not (math.isfinite(self.cycles) and self.cycles > 0):
+            raise ParameterError(f"[life] cycles = {self.cycles!r} must be a finite number > 0 (crank revolutions)")
+        if not (math.isfinite(self.rtol) and self.rtol > 0):
+            raise ParameterError(f"[life] rtol = {self.rtol!r} must be a finite number > 0")
+        if not (isinstance(self.average_revolutions, int) and self.average_revolutions >= 2):
+            raise ParameterError(f"[life] average_revolutions = {self.average_revolutions!r} must be an integer >= 2")
+        if not isinstance(self.start_from_new, bool):
+            raise ParameterError(f"[life] start_from_new = {self.start_from_new!r} must be true or false")
+
+
+def _life(table) -> LifeSpec:
+    """The ``[life]`` table as a [`LifeSpec`][optim.spec.LifeSpec]."""
+    if not isinstance(table, dict):
+        raise ParameterError("[life] must be a table with cycles (and rtol, wear, average_revolutions)")
+    _keys("[life]", table, {"cycles", "rtol", "wear", "average_revolutions", "start_from_new"})
+    if "cycles" not in table:
+        raise ParameterError("[life]: cycles is missing (crank revolutions of wear)")
+    wear = table.get("wear", [])
+    if not (isinstance(wear, list) and all(isinstance(j, str) for j in wear)):
+        raise ParameterError(f"[life] wear = {wear!r} must be a list of joint names")
+    spec = LifeSpec(
+        cycles=_number("[life]", "cycles", table["cycles"]),
+        rtol=_number("[life]", "rtol", table.get("rtol", LifeSpec.rtol)),
+        wear=tuple(wear),
+        average_revolutions=table.get("average_revolutions", LifeSpec.average_revolutions),
+        start_from_new=table.get("start_from_new", LifeSpec.start_from_new),
+    )
+    return spec
+
 
 # ---------------------------------------------------------------------------------------- the file
 
 
-def _mechanism(section: dict, folder: Path):
+def _mechanism(section: dict, folder: Path, wear=()):
+    """The ``[mechanism]`` table's mechanism; the joints in ``wear`` made worn before the table's
+    settings apply to the preset or file (so that they can set the wear law's values)."""
+    from jaxcrank.numerics.wear_run import with_wear
+
     section = dict(section)
     if "preset" in section and "file" in section:
         raise ParameterError("[mechanism]: give preset or file, not both")
-    if "preset" in section:
-        base = preset(section.pop("preset"))
-        return mech_config.from_dict(section, base) if section else base
-    if "file" in section:
-        base = mech_config.load(folder / section.pop("file"))
+    if "preset" in section or "file" in section:
+        if "preset" in section:
+            base = preset(section.pop("preset"))
+        else:
+            base = mech_config.load(folder / section.pop("file"))
+        base = with_wear(base, wear, where="[life] wear")
         return mech_config.from_dict(section, base) if section else base
     if not section:
         raise ParameterError(
             '[mechanism]: name a preset (preset = "paper"), a file (file = "my_linkage.toml") or '
             "write the mechanism out in the table"
         )
-    return mech_config.from_dict(section)
+    return with_wear(mech_config.from_dict(section), wear, where="[life] wear")
 
 
 def _number(where: str, key: str, value) -> float:
@@ -75,13 +139,14 @@ def _keys(where: str, table: dict, valid: set) -> None:
 
 
 def from_dict(data: dict, folder: Path = Path(".")) -> tuple[DesignProblem, dict]:
-    """The problem of a problem file's tables, and its run's tables (plain values): ``optimizer``
-    (the file's ``[optimizer]``) and ``pareto`` (its ``[pareto]``, None without one).
+    """The problem of a problem file's tables, and its run's tables: ``optimizer`` (the file's
+    ``[optimizer]``), ``pareto`` (its ``[pareto]``, None without one) and ``life`` (its
+    ``[life]`` as a [`LifeSpec`][optim.spec.LifeSpec], None without one).
 
     Args:
         data: the file's tables (`TABLES`: ``title``, ``[mechanism]``, ``[variables]``,
             ``[derived]``, ``[objective]``, ``[scatter]``, ``[[constraints]]``, ``[solver]``,
-            ``[optimizer]``, ``[pareto]``).
+            ``[optimizer]``, ``[pareto]``, ``[life]``).
         folder: where a ``[mechanism] file`` is looked for (the problem file's folder).
 
     Raises:
@@ -91,7 +156,16 @@ def from_dict(data: dict, folder: Path = Path(".")) -> tuple[DesignProblem, dict
     for need in ("mechanism", "variables", "objective"):
         if need not in data:
             raise ParameterError(f"problem file: the [{need}] table is missing")
-    base = _mechanism(data["mechanism"], folder)
+    life = _life(data["life"]) if "life" in data else None
+    base = _mechanism(data["mechanism"], folder, life.wear if life is not None else ())
+    if life is not None:
+        from jaxcrank.numerics.wear_run import worn_joints
+
+        if not worn_joints(base):
+            raise ParameterError(
+                '[life]: the mechanism has no worn joint: name clearance joints in [life] wear = ["B"], or give a '
+                'joint law = "worn"'
+            )
     names, lower, upper, start, lengths = [], [], [], [], []
     for name, table in data["variables"].items():
         where = f"[variables.{name}]"
@@ -173,7 +247,9 @@ def from_dict(data: dict, folder: Path = Path(".")) -> tuple[DesignProblem, dict
     if any(v is not None for v in start):  # the others at their defaults
         filled = [d if v is None else v for v, d in zip(start, problem.default_start())]
         problem = dataclasses.replace(problem, start=tuple(filled))
-    return problem, {"optimizer": dict(data.get("optimizer", {})), "pareto": data.get("pareto")}
+    if life is not None and (data.get("pareto") is not None or not isinstance(objective_kind, Steady)):
+        raise ParameterError("[life] takes the steady-state objective and no [pareto] table")
+    return problem, {"optimizer": dict(data.get("optimizer", {})), "pareto": data.get("pareto"), "life": life}
 
 
 def load(path) -> tuple[DesignProblem, dict]:
