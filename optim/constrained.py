@@ -230,9 +230,13 @@ class QuantityEvaluator(SteadyEvaluator):
         self.lam, self.mu, self.offset = np.asarray(lam, dtype=float), float(mu), 0.0
         self.offset = self.lagrangian(self.outputs_at(x)) - 1.0
 
+    def report_at(self, x) -> dict:
+        """[`report`][optim.steady.report] of the steady state the outputs at SI design ``x`` come from."""
+        return report(self.steady_at(x))
+
     def value(self, x) -> tuple[float, dict]:
         out = self.outputs_at(x)
-        self.last_report = report(self.steady_at(x))
+        self.last_report = self.report_at(x)
         return (math.nan if not np.all(np.isfinite(out)) else self.lagrangian(out)), self.last_report
 
     def value_and_grad(self, x) -> tuple[float, np.ndarray, dict]:

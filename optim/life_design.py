@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from pathlib import Path
 
 import jax
@@ -113,7 +112,7 @@ class LifeEvaluator(QuantityEvaluator):
             text = json.dumps({"cycles": self.spec.cycles, "rtol": self.spec.rtol, "steps_cycles": self.schedule})
             (self.folder / SCHEDULE_FILE).write_text(text)
 
-    def life_report(self, x) -> dict:
+    def report_at(self, x) -> dict:
         """[`report`][optim.steady.report] of the run's last steady state, its ``regime`` the run's
         (periodic only when every point and predictor is; ``failed`` with the reason as ``note``)."""
         run = self.life_at(x)
@@ -132,18 +131,13 @@ class LifeEvaluator(QuantityEvaluator):
         return run.points[-1].steady if isinstance(run, Life) else SteadyEvaluator.steady_at(self, x)
 
     def regime_at(self, x):
-        return self.life_report(x)["regime"]
+        return self.report_at(x)["regime"]
 
     def warm_from(self, x) -> None:
         self.life_at(x)  # every run is kept
 
     def prepare(self, x) -> bool:
         return False  # a life gradient is traced at its run: nothing to compile ahead
-
-    def value(self, x) -> tuple[float, dict]:
-        out = self.outputs_at(x)
-        self.last_report = self.life_report(x)
-        return (math.nan if not np.all(np.isfinite(out)) else self.lagrangian(out)), self.last_report
 
     def outputs_at(self, x) -> np.ndarray:
         key = _key(x)
@@ -163,7 +157,7 @@ class LifeEvaluator(QuantityEvaluator):
         run's report."""
         x = np.asarray(x, dtype=float)
         run = self.life_at(x)
-        info = self.last_report = self.life_report(x)
+        info = self.last_report = self.report_at(x)
         k = len(self.problem.quantities) + 1
         if not isinstance(run, Life):
             return np.full(k, np.nan), np.full((k, x.size), np.nan), info

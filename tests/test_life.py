@@ -109,7 +109,7 @@ def test_bad_life_arguments_name_the_parameter(stand_in):
         lf.LifeOptions(average_revolutions=1)
 
 
-def _nonlinear(mech, hole, pin, j, xp):
+def _nonlinear(mech, hole, pin, j):
     """A stand-in wear rate that depends on the design (each hole's wear coefficient) and
     nonlinearly on the profiles: kappa A + B P + G P^2 per coefficient (m per cycle)."""
     kappa = mech.joints[j].wear.hole_coefficient / 1e-6
@@ -119,7 +119,7 @@ def _nonlinear(mech, hole, pin, j, xp):
 def _nonlinear_at(mech, steady):
     """``life_gradient._at``'s stand-in: the rates above and a metric of the profiles (traceable)."""
     profiles = nw.profiles_of(mech)
-    rate = {j: _nonlinear(mech, h, p, j, jnp) for j, (h, p) in profiles.items()}
+    rate = {j: _nonlinear(mech, h, p, j) for j, (h, p) in profiles.items()}
     metric = 1e12 * sum(jnp.sum(h**2) + jnp.sum(p**2) for h, p in profiles.values())
     return rate, {"wear_metric_um2": metric}
 
