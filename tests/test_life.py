@@ -19,6 +19,8 @@ import jaxcrank as jc
 from jaxcrank.analysis import life as lf
 from jaxcrank.numerics import wear_run as nw
 from jaxcrank.physics.params import ParameterError
+from jaxcrank.physics.wear import profile_on_grid
+from jaxcrank.runs import config
 
 #: the stand-in slow map dP/dN = A + B P, per coefficient (m per cycle, 1 per cycle)
 A, B = 2e-9, -2e-6
@@ -202,6 +204,10 @@ def test_cli_writes_the_life_and_resumes_a_run(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["life"]["reached"] and 0.0 < summary["life"]["cycles_to_limit"] <= 150.0
     assert {p.name for p in (out / "figures").iterdir()} == {"profiles.png", "metrics.png", "contact_arcs.png"}
+    worn = config.load(out / "worn.toml")  # the mechanism as the run left it: its holes as deep as the last row
+    angles = jnp.linspace(0.0, 2.0 * math.pi, 720, endpoint=False)
+    deepest = float(jnp.max(jnp.abs(profile_on_grid(nw.profiles_of(worn)["B"][0], angles))))
+    assert deepest == pytest.approx(float(rows[-1]["B_hole_max_depth_m"]), rel=1e-12)
     more = _cli(*FOUR_BAR, "--limit", "0.1781", "--cycles", "250", "--out", str(out), "--resume")
     assert more.returncode == 0, more.stderr[-2000:]
     again = list(csv.DictReader((out / "life.csv").open()))

@@ -202,3 +202,59 @@ def test_the_html_page_plays_in_headless_chromium(run_dir, tmp_path):
         with Image.open(shot) as im:
             shots.append(np.asarray(im.convert("RGB")))
     assert shots[0].shape == shots[1].shape and (shots[0] != shots[1]).any()
+
+
+def _worn_paper(depth: float):
+    """The paper's mechanism with worn joints; the hole at B worn ``depth (1 + cos 2 theta) / 2``
+    in the rod's frame (m), the pins and the hole at C new."""
+    from jaxcrank.numerics import wear_run as nw
+
+    mech = jc.preset("paper-wear")
+    prof = nw.profiles_of(mech)
+    hole = np.zeros(np.shape(prof["B"][0]))
+    hole[0] = hole[2] = depth / 2  # a_0 and a_2 (the cos 2 theta coefficient)
+    return nw.with_profiles(mech, {"B": (jnp.asarray(hole), prof["B"][1]), "C": prof["C"]})
+
+
+def test_a_worn_hole_is_drawn_as_it_is_worn_and_turns_with_its_body(run_dir):
+    """The gap a worn joint leaves the pin is the clearance plus the hole's depth at that
+    direction of the hole's body (and the round joint's is the clearance); the animation's inset
+    draws that outline at every frame, turned with the rod, and the run's pin-trajectory figure
+    draws it at the end."""
+    from jaxcrank.runs import plots, view_cli
+    from jaxcrank.views import geometry as geo
+
+    depth = 2e-4
+    mech = _worn_paper(depth)
+    joints = {j.name: j for j in geo.layout(mech).joints}
+    c = joints["B"].clearance  # the preset's 0.5 mm, as hole less pin radius
+    phi = np.linspace(0.0, 2.0 * math.pi, 13)
+    for turn in (0.0, 0.3):
+        expected = c + depth * (1.0 + np.cos(2.0 * (phi - turn))) / 2.0
+        np.testing.assert_allclose(geo.gap(joints["B"], phi, turn, 1.1), expected, rtol=1e-12)
+    np.testing.assert_array_equal(geo.gap(joints["C"], phi, 0.3, 1.1), joints["C"].clearance)  # new: round
+    round_b = {j.name: j for j in geo.layout(jc.preset("paper")).joints}["B"]
+    assert round_b.wear is None
+    np.testing.assert_array_equal(geo.gap(round_b, phi), round_b.clearance)
+
+    _, cols = view_cli.read_run(run_dir)  # the paper's run: the same bodies and columns
+    anim = animation.animate(cols=cols, mech=mech, per_revolution=12)
+    lines = {ax.get_title().split(":")[0]: ax.get_lines() for ax in anim.fig.axes[1:]}
+    assert "worn hole" in [ax.get_title() for ax in anim.fig.axes[1:] if ax.get_title().startswith("B")][0]
+    for k in (0, 6):
+        anim.update_frame(k)
+        rod = math.radians(float(cols["rod_angle"][anim.indices[k]]))
+        outline = [ln for ln in lines["B"] if ln.get_linestyle() == "-" and len(ln.get_xdata()) == 181][0]
+        x, y = np.asarray(outline.get_xdata()), np.asarray(outline.get_ydata())
+        np.testing.assert_allclose(np.hypot(x, y), 1e3 * (c + depth * (1 + np.cos(2 * (np.arctan2(y, x) - rod))) / 2),
+                                   rtol=1e-9)  # fmt: skip
+    assert not any(len(ln.get_xdata()) == 181 and ln.get_linestyle() == "-" for ln in lines["C"])
+    import matplotlib.pyplot as plt
+
+    plt.close(anim.fig)
+    figs = plots.figures(cols, mech)
+    fig = figs["pin_trajectories.png"]
+    labels = [t.get_text() for ax in fig.axes for t in (ax.get_legend().get_texts() if ax.get_legend() else [])]
+    assert labels.count("worn, at the end") == 1  # B only: C is new
+    for f in figs.values():
+        plt.close(f)

@@ -1,6 +1,6 @@
 """``jaxcrank life [--mechanism NAME | --config FILE | --design RESULT_JSON] [--set KEY=VALUE ...]
 --cycles N --out DIR``: the life of a mechanism whose joints wear ([`jaxcrank.analysis.life.life`][]):
-``life.csv``, ``profiles.csv``, ``summary.json`` and figures, checkpointed after every step."""
+``life.csv``, ``profiles.csv``, ``summary.json``, ``worn.toml`` and figures, checkpointed after every step."""
 
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ def add_arguments(p):
         'Wear the mechanism\'s worn joints (law = "worn", or those named by --wear) over --cycles crank '
         "revolutions by cycle averaging: the steady state at the current profiles, the wear per cycle from "
         "Archard's law, a step of many cycles with error control, repeat. Writes life.csv (one row per step), "
-        "profiles.csv (the worn profiles), summary.json (the life to --limit of --metric) and figures/ into "
-        "--out; a killed run carries on with --resume."
+        "profiles.csv (the worn profiles), summary.json (the life to --limit of --metric), worn.toml (the worn "
+        "mechanism, for --config of the other commands) and figures/ into --out; a killed run carries on with --resume."
     )
     config.add_mechanism_arguments(p, "wear")
     p.add_argument("--cycles", type=float, required=True, help="crank revolutions to run (e.g. 1e7)")
@@ -183,6 +183,7 @@ def run(args) -> int:
     profiles = [{j: (jnp.asarray(h), jnp.asarray(p)) for j, (h, p) in pr.items()} for pr in data["profiles"]]
     _write_csv(out / "life.csv", rows)
     _write_csv(out / "profiles.csv", profile_rows(cycles, profiles))
+    config.save(nw.with_profiles(mech, profiles[-1]), out / "worn.toml")  # the mechanism as the run left it
     summary = {
         "mechanism": getattr(mech, "name", type(mech).__name__),
         "cycles": args.cycles,

@@ -143,6 +143,7 @@ def _pin_trajectories(cols, mech):
         ax.plot(ex[:1], ey[:1], "o", color="C2", ms=5, label="start", zorder=5)
         if "revolute" in mech.joints[joint].kinds:
             ax.plot(c * np.cos(circle), c * np.sin(circle), "k--", lw=1.0, label=f"clearance {c:.3g} mm")
+            _worn_outline(ax, cols, mech, joint, circle)
             ax.set_aspect("equal")
             ax.set_title(f"joint {joint}: pin centre in its bearing", loc="left")
         else:
@@ -155,6 +156,22 @@ def _pin_trajectories(cols, mech):
     for ax in axes.flat[len(joints) :]:
         ax.set_visible(False)
     return fig
+
+
+def _worn_outline(ax, cols, mech, joint: str, directions) -> None:
+    """A worn joint's outline at the run's last sample (the worn hole turns with its body): how
+    far the pin's centre can go in every direction, mm. Nothing for a joint that does not wear."""
+    from ..views import geometry as geo
+
+    sketch = next(j for j in geo.layout(mech).joints if j.name == joint)
+    if sketch.wear is None or not any(np.any(profile) for profile in sketch.wear):
+        return
+    turn = []
+    for body, _ in (sketch.hole, sketch.pin):
+        key = f"{body}_angle"
+        turn.append(np.radians(float(np.asarray(cols[key])[-1])) if key in cols else 0.0)
+    r = 1e3 * geo.gap(sketch, directions, *turn)
+    ax.plot(r * np.cos(directions), r * np.sin(directions), "k-", lw=1.0, label="worn, at the end")
 
 
 def _transmission(cols, x: Abscissa):

@@ -58,6 +58,12 @@ def _force(cols, j, i):
     return -np.asarray(cols[f"force_{j}_normal"])[i][:, None] * unit
 
 
+def _body_angle(cols, body: str, i) -> np.ndarray:
+    """A body's angle at the samples ``i``, rad (0 for the ground, which has no column)."""
+    key = f"{body}_angle"
+    return np.radians(np.asarray(cols[key], dtype=float)[i]) if key in cols else np.zeros(len(i))
+
+
 def _force_text(newtons: float) -> str:
     return f"{newtons / 1e3:.3g} kN" if newtons >= 1e3 else f"{newtons:.3g} N"
 
@@ -155,20 +161,26 @@ def animate(
         f = _force(cols, j.name, idx)
         th = np.linspace(0, 2 * np.pi, 181)
         iax.plot(c * np.cos(th), c * np.sin(th), "k--", lw=0.8)
+        worn, outline = None, None
+        if j.wear is not None and any(np.any(w) for w in j.wear):  # a worn hole turns with its body
+            turn = [_body_angle(cols, side[0], idx)[:, None] for side in (j.hole, j.pin)]
+            worn = 1e3 * geo.gap(j, th[None, :], *turn)
+            (outline,) = iax.plot([], [], "k-", lw=0.9)
         iax.plot(e[:, 0], e[:, 1], color="0.6", lw=0.6)
         (dot,) = iax.plot([], [], "o", color=CLEARANCE, ms=4)
         arrow = iax.quiver(
             [0.0], [0.0], [0.0], [0.0], angles="xy", scale_units="xy", scale=1.0, color=CLEARANCE, width=0.02
         )
-        r = 1.35 * max(c, float(np.max(np.hypot(*e.T))))
+        r = 1.35 * max(c, float(np.max(np.hypot(*e.T))), 0.0 if worn is None else float(np.max(worn)))
         iax.set_xlim(-r, r)
         iax.set_ylim(-r, r)
         iax.set_aspect("equal")
         iax.tick_params(labelsize=6)
         reach = max(float(np.percentile(np.hypot(*f.T), 95)), 1e-12)  # an arrow of length c: this force
         scale = c / reach
-        iax.set_title(f"{j.name}: pin in hole [mm]\narrow: contact force, c = {_force_text(reach)}", fontsize=6.5)
-        panels.append((e, f, dot, arrow, scale))
+        what = "pin in worn hole (new: dashed)" if worn is not None else "pin in hole"
+        iax.set_title(f"{j.name}: {what} [mm]\narrow: contact force, c = {_force_text(reach)}", fontsize=6.5)
+        panels.append((e, f, dot, arrow, scale, worn, outline, th))
 
     def update(k):
         pose = {b: p[k] for b, p in real.items()}
@@ -178,11 +190,14 @@ def animate(
         moved += main.update(pose)
         clock.set_text(f"{t[k]:.4f} s {driver[k] % 360.0:5.1f}\N{DEGREE SIGN}")
         moved.append(clock)
-        for e, f, dot, arrow, scale in panels:
+        for e, f, dot, arrow, scale, worn, outline, th in panels:
             dot.set_data([e[k, 0]], [e[k, 1]])
             arrow.set_offsets([e[k]])
             arrow.set_UVC([f[k, 0] * scale], [f[k, 1] * scale])
             moved += [dot, arrow]
+            if outline is not None:
+                outline.set_data(worn[k] * np.cos(th), worn[k] * np.sin(th))
+                moved.append(outline)
         return moved
 
     return MechanismAnimation(fig, update, idx, fps)

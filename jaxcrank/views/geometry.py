@@ -67,6 +67,9 @@ class JointSketch:
             revolute joint).
         angle: a prismatic joint's held angle, the sliding body's less the guide body's,
             rad (0 for a revolute joint).
+        wear: a worn joint's profiles ``(hole, pin)``, each the Fourier coefficients of its
+            wear depth in its own body's frame (m; [`jaxcrank.physics.wear.Worn`][]); ``None``
+            for a joint that does not wear.
     """
 
     name: str
@@ -77,6 +80,7 @@ class JointSketch:
     law: str
     direction: float = 0.0
     angle: float = 0.0
+    wear: tuple[np.ndarray, np.ndarray] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,9 +155,27 @@ def layout(mech) -> Layout:
         direction = _number(conn.direction) if conn.kind == "prismatic" else 0.0
         held = _number(conn.angle) if conn.kind == "prismatic" else 0.0
         sides = (hole.body, hole.point), (pin.body, pin.point)
-        joints.append(JointSketch(j, conn.kind, *sides, c, law.name, direction, held))
+        wear = (np.asarray(law.hole_wear), np.asarray(law.pin_wear)) if hasattr(law, "hole_wear") else None
+        joints.append(JointSketch(j, conn.kind, *sides, c, law.name, direction, held, wear))
     ground = {p: _xy(v) for p, v in lk.ground.items()}
     return Layout(lk.name, parts, ground, tuple(joints), lk.driver.body)
+
+
+def gap(joint: JointSketch, directions, hole_angle=0.0, pin_angle=0.0) -> np.ndarray:
+    """How far the pin's centre can move from the hole's in the world ``directions`` (rad) before
+    the surfaces touch, m: the clearance plus, for a worn joint, the hole's wear depth at that
+    direction in the hole body's frame (the body at ``hole_angle``, rad) and the pin's in the pin
+    body's (at ``pin_angle``, rad). Broadcasts ``directions`` against the angles."""
+    from ..physics.wear import profile_on_grid
+
+    phi = np.asarray(directions, dtype=float)
+    c = 0.0 if joint.clearance is None else joint.clearance
+    if joint.wear is None:
+        return np.full(np.broadcast(phi, np.asarray(hole_angle), np.asarray(pin_angle)).shape, c)
+    hole, pin = joint.wear
+    depth_h = np.asarray(profile_on_grid(hole, phi - np.asarray(hole_angle, dtype=float)))
+    depth_p = np.asarray(profile_on_grid(pin, phi - np.asarray(pin_angle, dtype=float)))
+    return c + depth_h + depth_p
 
 
 def assembled_poses(mech, angle=None) -> dict[str, np.ndarray]:
