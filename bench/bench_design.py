@@ -330,7 +330,8 @@ def run_part(name: str, seed: int, budget: float, methods, path: Path, update: b
     from _common import machine
 
     from optim.budget import BudgetSpent
-    from optim.steady import SteadyEvaluator, forget_programs
+    from optim.programs import forget_programs
+    from optim.steady import SteadyEvaluator
 
     tic_all = time.perf_counter()
     base = json.loads(path.read_text())["budget_cpu_s"] if update else budget  # the part's budget

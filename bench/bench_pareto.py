@@ -44,7 +44,7 @@ import numpy as np
 from _common import machine
 
 from optim import constrained, pareto, spec
-from optim.steady import forget_programs
+from optim.programs import forget_programs
 
 ROOT = Path(__file__).resolve().parent
 PROBLEM = ROOT / "pareto-four-bar.toml"

@@ -36,7 +36,8 @@ def run(name: str, seed: int) -> dict:
     import jaxcrank as jc
     from jaxcrank.numerics import shooting
     from jaxcrank.physics.state import initial_state
-    from optim.steady import SteadyEvaluator, forget_programs
+    from optim.programs import forget_programs
+    from optim.steady import SteadyEvaluator
     from optim.way_in import periodic_start, start_points
 
     problem = build(name)

@@ -971,6 +971,29 @@ def table_life_validation_lag() -> str:
     )
 
 
+def table_first_gradient() -> str:
+    """``jaxcrank optimize --problem design``: cold, warm, and a variant in numbers with the warm cache."""
+    d = results("first_gradient")
+    rows = []
+    for r in d["runs"]:
+        t = r["seconds_this_call"]
+        way_in, compiling = t.get("classifying_starts", t.get("way_in")), t.get("gradient_compile_optimizer")
+        rows.append([
+            r["cache"], f"`{r['problem']}`", fmt(r["wall_s"]), fmt(r["time_to_first_gradient_s"]), fmt(way_in),
+            fmt(t.get("gradient_compile", compiling)), f"{r['final_objective']:.5f}",
+        ])  # fmt: skip
+    head = ["run", "problem", "command [s]", "first exact gradient [s]", "the way in [s]",
+            "compiling gradient programs [s]", "final objective [deg]"]  # fmt: skip
+    same = [[r["problem"], r["regime"], str(r["period_revolutions"]), str(r["dynamic_subspace"]),
+             fmt(r["seconds"]), fmt(r["gradient_compile_s"])] for r in d.get("in_process", [])]  # fmt: skip
+    more = ""
+    if same:
+        more = "\n*In one process, at one design where both are periodic:*\n\n" + table(
+            ["problem", "regime", "period [revolutions]", "dynamic subspace", "outputs and Jacobian [s]",
+             "compiling gradient programs [s]"], same)  # fmt: skip
+    return table(head, rows) + more + source("first_gradient")
+
+
 def table_paper_wear() -> str:
     """The paper's slider-crank over its life: the points of ``bench/paper_wear.py``'s run."""
     d = results("paper_wear")
@@ -1100,6 +1123,7 @@ TABLES = {
     "design_gradient": table_design_gradient,
     "window_gradients": table_window_gradients,
     "calibration_bench": table_calibration_bench,
+    "first_gradient": table_first_gradient,
     "life_validation": table_life_validation,
     "life_validation_lag": table_life_validation_lag,
     "paper_wear": table_paper_wear,

@@ -38,6 +38,7 @@ from jaxcrank.runs.sweep_table import atomic_write
 
 from .cli import STEADY_OPTIMIZER, settings_from_config
 from .design import DesignProblem
+from .problem import values_key, with_values
 from .steady import RegimeGuard, SteadyEvaluator, _key, _light, report
 
 #: the inequality's margin in units of the constraint's scale: limits are approached from inside
@@ -165,15 +166,17 @@ class QuantityEvaluator(SteadyEvaluator):
             )
         return self.outputs[key]
 
-    def _program_key(self, steady):
-        return ("outputs", structure(self.problem), steady.period_revolutions, steady.active)
+    def _program_key(self, steady, folded: bool = False):
+        shape = structure(self.problem)
+        return ("outputs", shape if folded else values_key(shape), steady.period_revolutions, steady.active)
 
-    def _program_fun(self, steady):
+    def _program_fun(self, steady, folded: bool = False):
         problem, objective, template = self.problem, self.objective, _light(steady)
 
-        def f(x, section_state, monodromy):
+        def f(x, section_state, monodromy, values):
+            p = problem if folded else with_values(problem, values)
             light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
-            return problem.outputs(objective.rms_at(problem.mechanism(x), light, every=True), x)
+            return p.outputs(objective.rms_at(p.mechanism(x), light, every=True), x)
 
         return lambda *a: (f(*a), jax.jacfwd(f)(*a))
 
@@ -188,7 +191,7 @@ class QuantityEvaluator(SteadyEvaluator):
         if not steady.ok:
             return np.full(k, np.nan), np.full((k, x.size), np.nan), info
         if steady.periodic:
-            args = (jnp.asarray(x), steady.section_state, steady.monodromy)
+            args = self._args(x, steady)
             out, jac = self._program(steady, args)(*args)
             self._gradient_done()
         else:
@@ -408,6 +411,7 @@ def solve(
             "way_in": state.get("search_seconds", 0.0),
             "total": time.perf_counter() - tic,
             "gradient_compile": ev.compile_seconds,
+            "first_gradient": ev.first_gradient,
         },
     }
 

@@ -17,7 +17,9 @@ shaded) and ``result.json``:
   design sets, derived lengths' points and mass properties included), ``final_mechanism`` and
   ``simulate_command`` (as ``jaxcrank optimize`` writes them for a preset problem);
 - ``rounds`` (the augmented Lagrangian's), ``iterations``, ``start_search`` (the way in) and
-  ``seconds`` (``way_in``, ``gradient_compile``, ``total``).
+  ``seconds`` (``way_in``, ``gradient_compile``, ``first_gradient``, ``total``) and
+  ``time_to_first_gradient_s`` (from the evaluator's making to its first exact gradient, the way in
+  included; None without one).
 """
 
 from __future__ import annotations
@@ -100,6 +102,7 @@ def run(args) -> int:
         "iterations": len(res["history"]),
         "start_search": res["start_search"],
         "seconds": res["seconds"],
+        "time_to_first_gradient_s": res["seconds"].get("first_gradient"),
     }
     if life is not None:
         first = res["new_clearance"]

@@ -190,6 +190,7 @@ class SliderCrankStroke:
     min_transmission_deg: float = 40.0
 
     kind = "slider_crank_stroke"
+    VALUES = ("stroke",)  # traceable: a compiled program takes it as an input (optim.problem.problem_values)
     #: the variables this group owns (name -> SI unit)
     OWNED = {"rod_length": "m", "min_transmission_angle": "rad", "rod_inertia_ratio": "1"}
 

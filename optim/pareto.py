@@ -50,7 +50,8 @@ from jaxcrank.runs.sweep_table import atomic_write
 from . import constrained
 from . import quantities as Q
 from .design import DesignProblem
-from .steady import _PROGRAMS, Steady
+from .programs import PROGRAMS
+from .steady import Steady
 
 #: the keys of a ``[pareto]`` table
 KEYS = ("quantity", "points", "weight", "scale")
@@ -326,7 +327,7 @@ def run_front(problem: DesignProblem, tables: dict, out, progress: bool = True, 
         if progress:
             what = f"{front.quantity} {'<=' if front.weight > 0 else '>='} {bound:.6g}" if bound is not None else kind
             print(f"pareto: point {k + 1} ({what})", file=sys.stderr)
-        cpu, wall, before = time.process_time(), time.perf_counter(), len(_PROGRAMS)
+        cpu, wall, before = time.process_time(), time.perf_counter(), len(PROGRAMS)
         folder = out / f"point_{k:02d}"
         res = constrained.solve(solved, opt, rounds, out=folder, resume=resume, progress=progress, evaluator=ev)
         x = res["final_design"]
@@ -341,7 +342,7 @@ def run_front(problem: DesignProblem, tables: dict, out, progress: bool = True, 
             "nondominated": False,
             "iterations": len(res["history"]),
             "rounds": len(res["rounds"]),
-            "programs_compiled": len(_PROGRAMS) - before,
+            "programs_compiled": len(PROGRAMS) - before,
             "cpu_seconds": time.process_time() - cpu,
             "wall_seconds": time.perf_counter() - wall,
         }

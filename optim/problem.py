@@ -17,6 +17,7 @@ algorithm, exact for one active constraint and convergent in general).
 from __future__ import annotations
 
 import abc
+import copy
 import dataclasses
 
 import jax
@@ -211,6 +212,62 @@ def mechanism_key(mech: Mechanism) -> tuple:
     kinds, laws, names) and its leaves' dtypes, shapes and bytes."""
     leaves, treedef = jax.tree.flatten(mech)
     return str(treedef), tuple((np.asarray(v).dtype.str, np.shape(v), np.asarray(v).tobytes()) for v in leaves)
+
+
+def _derived_values(problem) -> tuple[str, ...]:
+    """The derived group's fields that are traceable numbers (its class's ``VALUES``; none by default)."""
+    return tuple(getattr(getattr(problem, "derived", None), "VALUES", ()))
+
+
+def problem_values(problem: AbstractProblem) -> tuple:
+    """The numbers of ``problem`` that its compiled programs can take as inputs instead of
+    constants: the base mechanism's nonzero numbers (in leaf order,
+    [`jaxcrank.numerics.solve.as_values`][]) and its derived group's ``VALUES`` fields (float64
+    arrays). Problems that differ only in them have the same [`values_key`][optim.problem.values_key]."""
+    from jaxcrank.numerics.solve import as_values
+
+    leaves = jax.tree.leaves(as_values(problem.base))
+    derived = getattr(problem, "derived", None)
+    return (
+        [v for v in leaves if isinstance(v, jax.Array)],
+        [jnp.asarray(getattr(derived, f), dtype=float) for f in _derived_values(problem)],
+    )
+
+
+def with_values(problem: AbstractProblem, values) -> AbstractProblem:
+    """``problem`` with the numbers of [`problem_values`][optim.problem.problem_values] replaced by
+    ``values`` (traceable: a compiled program's inputs), without the construction's checks."""
+    from jaxcrank.numerics.solve import as_values
+
+    base_values, derived_values = values
+    leaves, treedef = jax.tree.flatten(as_values(problem.base))
+    it = iter(base_values)
+    base = jax.tree.unflatten(treedef, [next(it) if isinstance(v, jax.Array) else v for v in leaves])
+    out = copy.copy(problem)
+    object.__setattr__(out, "base", base)
+    names = _derived_values(problem)
+    if names:
+        derived = dataclasses.replace(problem.derived, **dict(zip(names, derived_values)))
+        object.__setattr__(out, "derived", derived)
+    return out
+
+
+def values_key(problem: AbstractProblem) -> tuple:
+    """A hashable, picklable value equal for problems that differ only in the numbers
+    [`problem_values`][optim.problem.problem_values] lists: the problem without them (the base's
+    tree structure and its zeros and other leaves, the derived group without its ``VALUES``) and
+    without its start, title and variables' bounds and linear constraints, which no traced method
+    of a problem reads (a program takes the design itself)."""
+    from jaxcrank.numerics.solve import as_values
+
+    leaves, treedef = jax.tree.flatten(as_values(problem.base))
+    base = (str(treedef), tuple("value" if isinstance(v, jax.Array) else (type(v).__name__, repr(v)) for v in leaves))
+    skip = {"base", "base_key", "start", "derived", "title", "lower", "upper", "A", "b"}
+    fields = tuple((f.name, getattr(problem, f.name)) for f in dataclasses.fields(problem) if f.name not in skip)
+    derived = getattr(problem, "derived", None)
+    if derived is not None:
+        derived = dataclasses.replace(derived, **{f: None for f in _derived_values(problem)})
+    return type(problem).__name__, base, fields, derived
 
 
 def known_parameter(base: Mechanism, name: str) -> None:

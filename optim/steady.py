@@ -46,6 +46,8 @@ from jaxcrank.physics.signals import metric_definitions, rms_metrics
 
 from .ensemble import Ensemble
 from .objective import AbstractObjective, options_fields, value_and_grad
+from .problem import problem_values, values_key, with_values
+from .programs import FOLDED, PENDING, PROGRAMS, TRACE_ERRORS, compile_program, compiler
 
 #: the steady-state objective's default settings: periods up to 2 revolutions, 720 samples per
 #: revolution; where Newton shooting fails, the design's value is its long-run statistics (labelled
@@ -172,49 +174,6 @@ def report(steady: S.SteadyState) -> dict:
     return out
 
 
-#: compiled value-and-gradient programs: (problem without its start, period, dynamic subspace) -> program
-_PROGRAMS: dict = {}
-
-
-#: compilations started by `SteadyEvaluator.prepare`: key -> future of (program, seconds)
-_PENDING: dict = {}
-_COMPILER = []
-
-
-def _compiler():
-    """The one background thread that compiles prepared programs."""
-    if not _COMPILER:
-        from concurrent.futures import ThreadPoolExecutor
-
-        _COMPILER.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxcrank-compile"))
-    return _COMPILER[0]
-
-
-def _compile(fun, args, key):
-    """``fun`` jitted, lowered and compiled for ``args``, and the wall time that took, s. With the
-    compilation cache on and equinox's checks as NaN for the process
-    ([`jaxcrank.runs.cache.checks_as_nan_from_now`][]: no host callback in the program), its trace is
-    stored under ``key`` ([`jaxcrank.runs.cache.exported`][]) and its executable in JAX's cache, so a
-    later process loads both."""
-    from jaxcrank.runs import cache
-
-    tic = time.perf_counter()
-    stored = cache.folder() is not None and cache.checking_as_nan()
-    jitted = cache.exported(fun, ("steady gradient", key), *args) if stored else jax.jit(fun)
-    program = jitted.lower(*args).compile()
-    return program, time.perf_counter() - tic
-
-
-def forget_programs() -> None:
-    """Drop every compiled value-and-gradient program of the steady-state objective (and wait for
-    any being compiled), so the next evaluation compiles its own (benchmarks that count
-    compilation in each method's time)."""
-    for pending in _PENDING.values():
-        pending.result()
-    _PENDING.clear()
-    _PROGRAMS.clear()
-
-
 def warm_solve(solve, last, settle_revolutions: int, again: bool = True) -> S.SteadyState:
     """The steady state ``solve(warm_start)`` finds warm-started from ``last`` (the last periodic
     one, or None); a warm start that finds no orbit without a full settle of
@@ -274,7 +233,8 @@ class SteadyEvaluator:
             return known
         if self.budget is not None:
             self.budget.check("a steady-state solve")
-        mech = self.problem.mechanism(jnp.asarray(key))
+        # the problem's numbers as arrays: one compiled solve serves problems that differ only in them
+        mech = with_values(self.problem, problem_values(self.problem)).mechanism(jnp.asarray(key))
         steady = warm_solve(
             lambda warm: self.objective.solve(mech, warm_start=warm),
             self.last,
@@ -328,42 +288,68 @@ class SteadyEvaluator:
         steady = self.steady_at(x)
         return steady.regime if steady.ok else FAILED
 
-    def _program_key(self, steady: S.SteadyState):
+    def _program_key(self, steady: S.SteadyState, folded: bool = False):
         """The store key of the value-and-gradient program for the orbits of ``steady``'s period and
-        dynamic subspace (the problem without its start: multistart runs share it)."""
-        return (dataclasses.replace(self.problem, start=None), steady.period_revolutions, steady.active)
+        dynamic subspace: the problem without its start and its numbers (multistart runs and problems
+        that differ only in numbers share it, [`values_key`][optim.problem.values_key]); ``folded``: with them."""
+        problem = dataclasses.replace(self.problem, start=None) if folded else values_key(self.problem)
+        return (problem, steady.period_revolutions, steady.active)
 
-    def _program_fun(self, steady: S.SteadyState):
-        """The function that program compiles, of (the design, the orbit's section state, its monodromy)."""
+    def _program_fun(self, steady: S.SteadyState, folded: bool = False):
+        """The function that program compiles, of (the design, the orbit's section state, its monodromy,
+        the problem's numbers; ``folded``: those are ignored, the problem's own compiled in)."""
         problem, objective, template = dataclasses.replace(self.problem, start=None), self.objective, _light(steady)
 
-        def f(x, section_state, monodromy):
+        def f(x, section_state, monodromy, values):
+            p = problem if folded else with_values(problem, values)
             light = dataclasses.replace(template, section_state=section_state, monodromy=monodromy)
-            rms = objective.rms_at(problem.mechanism(x), light)
-            return problem.loss(rms) + problem.cost(x)
+            return p.loss(objective.rms_at(p.mechanism(x), light)) + p.cost(x)
 
         return value_and_grad(f, True)
 
+    def _args(self, x, steady: S.SteadyState) -> tuple:
+        """The program's arguments at SI design ``x``."""
+        return (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy, problem_values(self.problem))
+
+    def _key_now(self, steady: S.SteadyState):
+        """The program's key: with the numbers left out, unless they cannot be inputs (``FOLDED``)."""
+        key = self._program_key(steady)
+        return self._program_key(steady, folded=True) if key in FOLDED else key
+
+    def _build(self, steady: S.SteadyState, args) -> tuple:
+        """``(program, seconds, key)``: compiled with the problem's numbers as inputs, or, where a
+        number is read at trace time, as constants (a program per problem)."""
+        key = self._key_now(steady)
+        if key not in FOLDED and key == self._program_key(steady):
+            try:
+                return (*compile_program(self._program_fun(steady), args, key), key)
+            except TRACE_ERRORS:
+                FOLDED.add(key)
+        key = self._program_key(steady, folded=True)
+        return (*compile_program(self._program_fun(steady, folded=True), args, key), key)
+
     def _program(self, steady: S.SteadyState, args):
         """The compiled program of [`_program_fun`][optim.steady.SteadyEvaluator._program_fun] for
-        ``args`` = (the design, the orbit's section state, its monodromy): one program serves every
-        design of a regime, and every evaluator of the same problem (its start aside: multistart runs
-        share it). Compiled at its first use (the budget checked first), or taken from a compilation
-        [`prepare`][optim.steady.SteadyEvaluator.prepare] started; timed into ``compile_seconds``."""
-        key = self._program_key(steady)
-        if key not in _PROGRAMS:
-            pending = _PENDING.pop(key, None)
+        ``args`` = (the design, the orbit's section state, its monodromy, the problem's numbers): one
+        program serves every design of a regime, and every evaluator of the same problem (its start and
+        numbers aside: multistart runs and variants share it). Compiled at its first use (the budget
+        checked first), or taken from a compilation [`prepare`][optim.steady.SteadyEvaluator.prepare]
+        started; timed into ``compile_seconds``."""
+        key = self._key_now(steady)
+        if key not in PROGRAMS:
+            # a compilation prepare() started under the numbers' key may have fallen back to the folded one
+            pending = PENDING.pop(key, None) or PENDING.pop(self._program_key(steady), None)
             if pending is None:
                 if self.budget is not None:
                     self.budget.check("compiling the gradient program")
-                program, seconds = _compile(self._program_fun(steady), args, key)
+                program, seconds, key = self._build(steady, args)
             else:
-                program, seconds = pending.result()
+                program, seconds, key = pending.result()
             self.compile_seconds += seconds
-            if len(_PROGRAMS) >= 8:
-                _PROGRAMS.pop(next(iter(_PROGRAMS)))
-            _PROGRAMS[key] = program
-        return _PROGRAMS[key]
+            if len(PROGRAMS) >= 8:
+                PROGRAMS.pop(next(iter(PROGRAMS)))
+            PROGRAMS[key] = program
+        return PROGRAMS[key]
 
     def prepare(self, x) -> bool:
         """Start compiling, in a background thread, the gradient program the periodic steady state at
@@ -373,11 +359,10 @@ class SteadyEvaluator:
         steady = self._known(_key(x))
         if steady is None or not steady.periodic:
             return False
-        key = self._program_key(steady)
-        if key in _PROGRAMS or key in _PENDING:
+        key = self._key_now(steady)
+        if key in PROGRAMS or key in PENDING:
             return False
-        args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
-        _PENDING[key] = _compiler().submit(_compile, self._program_fun(steady), args, key)
+        PENDING[key] = compiler().submit(self._build, steady, self._args(x, steady))
         return True
 
     def _gradient_done(self) -> None:
@@ -395,7 +380,7 @@ class SteadyEvaluator:
         if not steady.ok:
             return math.nan, np.full(x.shape, np.nan), info
         if steady.periodic:
-            args = (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy)
+            args = self._args(x, steady)
             value, grad = self._program(steady, args)(*args)
             self._gradient_done()
             return float(value), np.asarray(grad), info

@@ -204,7 +204,7 @@ def test_a_small_front_traces_end_to_end_from_the_command_line(tmp_path):
     import tomli_w
 
     from jaxcrank.runs.cli import main
-    from optim.steady import _PROGRAMS
+    from optim.programs import PROGRAMS
 
     file = tmp_path / "front.toml"
     file.write_text(tomli_w.dumps(_data(optimizer={"max_iterations": 2, "rounds": 1})))
@@ -217,7 +217,7 @@ def test_a_small_front_traces_end_to_end_from_the_command_line(tmp_path):
     assert middle["bound"] == pytest.approx(0.5 * (first["quantity"] + second["quantity"]))
     assert middle["feasible"] and middle["quantity"] <= middle["bound"] * (1 + 1e-3)
     assert middle["programs_compiled"] == 0 or middle["regime"] != first["regime"]
-    structures = {k[1] for k in _PROGRAMS if k[0] == "outputs"}
+    structures = {k[1] for k in PROGRAMS if k[0] == "outputs"}
     assert len(structures) <= 2
     assert res["hypervolume"] > 0.0
     for name in ("pareto.json", "pareto.csv", "pareto.png", "problem.toml"):
