@@ -255,13 +255,17 @@ def with_values(problem: AbstractProblem, values) -> AbstractProblem:
 def values_key(problem: AbstractProblem) -> tuple:
     """A hashable, picklable value equal for problems that differ only in the numbers
     [`problem_values`][optim.problem.problem_values] lists: the problem without them (the base's
-    tree structure and its zeros and other leaves, the derived group without its ``VALUES``) and
+    tree structure, its values' shapes, its zeros and other leaves, the derived group without its ``VALUES``) and
     without its start, title and variables' bounds and linear constraints, which no traced method
     of a problem reads (a program takes the design itself)."""
     from jaxcrank.numerics.solve import as_values
 
     leaves, treedef = jax.tree.flatten(as_values(problem.base))
-    base = (str(treedef), tuple("value" if isinstance(v, jax.Array) else (type(v).__name__, repr(v)) for v in leaves))
+
+    def leaf(v):  # a value's shape and dtype (the program's input), any other leaf itself
+        return ("value", v.shape, str(v.dtype)) if isinstance(v, jax.Array) else (type(v).__name__, repr(v))
+
+    base = (str(treedef), tuple(leaf(v) for v in leaves))
     skip = {"base", "base_key", "start", "derived", "title", "lower", "upper", "A", "b"}
     fields = tuple((f.name, getattr(problem, f.name)) for f in dataclasses.fields(problem) if f.name not in skip)
     derived = getattr(problem, "derived", None)
