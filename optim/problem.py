@@ -214,6 +214,14 @@ def mechanism_key(mech: Mechanism) -> tuple:
     return str(treedef), tuple((np.asarray(v).dtype.str, np.shape(v), np.asarray(v).tobytes()) for v in leaves)
 
 
+def _base_leaves(problem) -> tuple[list, object]:
+    """The leaves and tree structure of ``problem``'s base with its nonzero numbers as arrays
+    ([`jaxcrank.numerics.solve.as_values`][])."""
+    from jaxcrank.numerics.solve import as_values
+
+    return jax.tree.flatten(as_values(problem.base))
+
+
 def _derived_values(problem) -> tuple[str, ...]:
     """The derived group's fields that are traceable numbers (its class's ``VALUES``; none by default)."""
     return tuple(getattr(getattr(problem, "derived", None), "VALUES", ()))
@@ -224,9 +232,7 @@ def problem_values(problem: AbstractProblem) -> tuple:
     constants: the base mechanism's nonzero numbers (in leaf order,
     [`jaxcrank.numerics.solve.as_values`][]) and its derived group's ``VALUES`` fields (float64
     arrays). Problems that differ only in them have the same [`values_key`][optim.problem.values_key]."""
-    from jaxcrank.numerics.solve import as_values
-
-    leaves = jax.tree.leaves(as_values(problem.base))
+    leaves, _ = _base_leaves(problem)
     derived = getattr(problem, "derived", None)
     return (
         [v for v in leaves if isinstance(v, jax.Array)],
@@ -237,10 +243,8 @@ def problem_values(problem: AbstractProblem) -> tuple:
 def with_values(problem: AbstractProblem, values) -> AbstractProblem:
     """``problem`` with the numbers of [`problem_values`][optim.problem.problem_values] replaced by
     ``values`` (traceable: a compiled program's inputs), without the construction's checks."""
-    from jaxcrank.numerics.solve import as_values
-
     base_values, derived_values = values
-    leaves, treedef = jax.tree.flatten(as_values(problem.base))
+    leaves, treedef = _base_leaves(problem)
     it = iter(base_values)
     base = jax.tree.unflatten(treedef, [next(it) if isinstance(v, jax.Array) else v for v in leaves])
     out = copy.copy(problem)
@@ -258,9 +262,7 @@ def values_key(problem: AbstractProblem) -> tuple:
     tree structure, its values' shapes, its zeros and other leaves, the derived group without its ``VALUES``) and
     without its start, title and variables' bounds and linear constraints, which no traced method
     of a problem reads (a program takes the design itself)."""
-    from jaxcrank.numerics.solve import as_values
-
-    leaves, treedef = jax.tree.flatten(as_values(problem.base))
+    leaves, treedef = _base_leaves(problem)
 
     def leaf(v):  # a value's shape and dtype (the program's input), any other leaf itself
         return ("value", v.shape, str(v.dtype)) if isinstance(v, jax.Array) else (type(v).__name__, repr(v))

@@ -311,20 +311,21 @@ class SteadyEvaluator:
         """The program's arguments at SI design ``x``."""
         return (jnp.asarray(x, dtype=float), steady.section_state, steady.monodromy, problem_values(self.problem))
 
-    def _key_now(self, steady: S.SteadyState):
-        """The program's key: with the numbers left out, unless they cannot be inputs (``FOLDED``)."""
-        key = self._program_key(steady)
-        return self._program_key(steady, folded=True) if key in FOLDED else key
+    def _keys(self, steady: S.SteadyState) -> tuple:
+        """``(key, plain)``: the program's key and the key without the problem's numbers; they are the
+        same unless the numbers cannot be inputs (``FOLDED``), when the key holds them."""
+        plain = self._program_key(steady)
+        return (self._program_key(steady, folded=True) if plain in FOLDED else plain), plain
 
-    def _build(self, steady: S.SteadyState, args) -> tuple:
-        """``(program, seconds, key)``: compiled with the problem's numbers as inputs, or, where a
-        number is read at trace time, as constants (a program per problem)."""
-        key = self._key_now(steady)
-        if key not in FOLDED and key == self._program_key(steady):
+    def _build(self, steady: S.SteadyState, args, plain) -> tuple:
+        """``(program, seconds, key)``: compiled with the problem's numbers as inputs (under ``plain``,
+        the key without them), or, where a number is read at trace time, as constants (a program per
+        problem)."""
+        if plain not in FOLDED:
             try:
-                return (*compile_program(self._program_fun(steady), args, key), key)
+                return (*compile_program(self._program_fun(steady), args, plain), plain)
             except TRACE_ERRORS:
-                FOLDED.add(key)
+                FOLDED.add(plain)
         key = self._program_key(steady, folded=True)
         return (*compile_program(self._program_fun(steady, folded=True), args, key), key)
 
@@ -335,14 +336,14 @@ class SteadyEvaluator:
         numbers aside: multistart runs and variants share it). Compiled at its first use (the budget
         checked first), or taken from a compilation [`prepare`][optim.steady.SteadyEvaluator.prepare]
         started; timed into ``compile_seconds``."""
-        key = self._key_now(steady)
+        key, plain = self._keys(steady)
         if key not in PROGRAMS:
-            # a compilation prepare() started under the numbers' key may have fallen back to the folded one
-            pending = PENDING.pop(key, None) or PENDING.pop(self._program_key(steady), None)
+            # a compilation prepare() started under the plain key may have fallen back to the folded one
+            pending = PENDING.pop(key, None) or PENDING.pop(plain, None)
             if pending is None:
                 if self.budget is not None:
                     self.budget.check("compiling the gradient program")
-                program, seconds, key = self._build(steady, args)
+                program, seconds, key = self._build(steady, args, plain)
             else:
                 program, seconds, key = pending.result()
             self.compile_seconds += seconds
@@ -359,10 +360,10 @@ class SteadyEvaluator:
         steady = self._known(_key(x))
         if steady is None or not steady.periodic:
             return False
-        key = self._key_now(steady)
+        key, plain = self._keys(steady)
         if key in PROGRAMS or key in PENDING:
             return False
-        PENDING[key] = compiler().submit(self._build, steady, self._args(x, steady))
+        PENDING[key] = compiler().submit(self._build, steady, self._args(x, steady), plain)
         return True
 
     def _gradient_done(self) -> None:

@@ -129,8 +129,12 @@ def _contact_forces(cols, mech, x: Abscissa | None = None, steady=None):
 
 def _pin_trajectories(cols, mech):
     """Each clearance joint's pin centre relative to its hole (a guide's slider: lateral
-    offset and tilt times half its length) with the clearance drawn; two panels to a row."""
+    offset and tilt times half its length) with the clearance drawn (and a worn hole's outline
+    at the run's end); two panels to a row."""
+    from ..views import geometry as geo
+
     joints = _clearance_joints(mech)
+    sketches = {j.name: j for j in geo.layout(mech).joints}
     columns = min(len(joints), 2)
     rows = -(-len(joints) // columns)
     fig, axes = plt.subplots(rows, columns, figsize=(8 if columns > 1 else 4.6, 4.4 * rows), squeeze=False,
@@ -143,7 +147,11 @@ def _pin_trajectories(cols, mech):
         ax.plot(ex[:1], ey[:1], "o", color="C2", ms=5, label="start", zorder=5)
         if "revolute" in mech.joints[joint].kinds:
             ax.plot(c * np.cos(circle), c * np.sin(circle), "k--", lw=1.0, label=f"clearance {c:.3g} mm")
-            _worn_outline(ax, cols, mech, joint, circle)
+            sketch = sketches[joint]
+            if sketch.worn:  # the worn hole turns with its body: drawn where the run left it
+                turn = [float(geo.body_angle(cols, side[0], -1)) for side in (sketch.hole, sketch.pin)]
+                r = 1e3 * geo.gap(sketch, circle, *turn)
+                ax.plot(r * np.cos(circle), r * np.sin(circle), "k-", lw=1.0, label="worn, at the end")
             ax.set_aspect("equal")
             ax.set_title(f"joint {joint}: pin centre in its bearing", loc="left")
         else:
@@ -156,22 +164,6 @@ def _pin_trajectories(cols, mech):
     for ax in axes.flat[len(joints) :]:
         ax.set_visible(False)
     return fig
-
-
-def _worn_outline(ax, cols, mech, joint: str, directions) -> None:
-    """A worn joint's outline at the run's last sample (the worn hole turns with its body): how
-    far the pin's centre can go in every direction, mm. Nothing for a joint that does not wear."""
-    from ..views import geometry as geo
-
-    sketch = next(j for j in geo.layout(mech).joints if j.name == joint)
-    if sketch.wear is None or not any(np.any(profile) for profile in sketch.wear):
-        return
-    turn = []
-    for body, _ in (sketch.hole, sketch.pin):
-        key = f"{body}_angle"
-        turn.append(np.radians(float(np.asarray(cols[key])[-1])) if key in cols else 0.0)
-    r = 1e3 * geo.gap(sketch, directions, *turn)
-    ax.plot(r * np.cos(directions), r * np.sin(directions), "k-", lw=1.0, label="worn, at the end")
 
 
 def _transmission(cols, x: Abscissa):

@@ -58,12 +58,6 @@ def _force(cols, j, i):
     return -np.asarray(cols[f"force_{j}_normal"])[i][:, None] * unit
 
 
-def _body_angle(cols, body: str, i) -> np.ndarray:
-    """A body's angle at the samples ``i``, rad (0 for the ground, which has no column)."""
-    key = f"{body}_angle"
-    return np.radians(np.asarray(cols[key], dtype=float)[i]) if key in cols else np.zeros(len(i))
-
-
 def _force_text(newtons: float) -> str:
     return f"{newtons / 1e3:.3g} kN" if newtons >= 1e3 else f"{newtons:.3g} N"
 
@@ -162,8 +156,8 @@ def animate(
         th = np.linspace(0, 2 * np.pi, 181)
         iax.plot(c * np.cos(th), c * np.sin(th), "k--", lw=0.8)
         worn, outline = None, None
-        if j.wear is not None and any(np.any(w) for w in j.wear):  # a worn hole turns with its body
-            turn = [_body_angle(cols, side[0], idx)[:, None] for side in (j.hole, j.pin)]
+        if j.worn:  # a worn hole turns with its body
+            turn = [geo.body_angle(cols, side[0], idx)[:, None] for side in (j.hole, j.pin)]
             worn = 1e3 * geo.gap(j, th[None, :], *turn)
             (outline,) = iax.plot([], [], "k-", lw=0.9)
         iax.plot(e[:, 0], e[:, 1], color="0.6", lw=0.6)

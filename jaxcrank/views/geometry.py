@@ -82,6 +82,11 @@ class JointSketch:
     angle: float = 0.0
     wear: tuple[np.ndarray, np.ndarray] | None = None
 
+    @property
+    def worn(self) -> bool:
+        """Whether the joint has worn: a wear profile that is not all zero (a new worn joint is round)."""
+        return self.wear is not None and any(bool(np.any(profile)) for profile in self.wear)
+
 
 @dataclasses.dataclass(frozen=True)
 class Layout:
@@ -176,6 +181,15 @@ def gap(joint: JointSketch, directions, hole_angle=0.0, pin_angle=0.0) -> np.nda
     depth_h = np.asarray(profile_on_grid(hole, phi - np.asarray(hole_angle, dtype=float)))
     depth_p = np.asarray(profile_on_grid(pin, phi - np.asarray(pin_angle, dtype=float)))
     return c + depth_h + depth_p
+
+
+def body_angle(cols, body: str, i=slice(None)) -> np.ndarray:
+    """A body's angle at the samples ``i`` of a run's columns (``<body>_angle``, deg), rad; 0 for
+    the ground, which has no column."""
+    key = f"{body}_angle"
+    if key in cols:
+        return np.radians(np.asarray(cols[key], dtype=float)[i])
+    return np.zeros_like(np.asarray(cols["t"], dtype=float)[i])
 
 
 def assembled_poses(mech, angle=None) -> dict[str, np.ndarray]:
