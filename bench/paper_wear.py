@@ -1,7 +1,8 @@
 """The paper's slider-crank after 10^6 and 10^7 cycles: ``jaxcrank life --mechanism paper-wear``
 to 1e6 cycles, then resumed to 1e7, at ``RTOL``; its points, the figures of the docs (the worn
 profiles at 0, 1e6 and 1e7 cycles; the first orbit's contact arcs) and
-``bench/results/paper_wear.json``.
+``bench/results/paper_wear.json``, where each point also gives the worn holes against the
+contact's geometry (`hole_geometry`).
 
     python bench/paper_wear.py [--out runs/paper-wear]    # about an hour on 2 cores
 """
@@ -54,6 +55,8 @@ def write_results(out: Path) -> None:
             "rms_transmission_angle_error_deg", "rms_slider_x_deviation_m", "peak_contact_force_B_N",
             "peak_contact_force_C_N", "rms_contact_force_B_N")  # fmt: skip
     points = [{k: r[k] for k in keep if k in r} for r in rows]
+    for point, profiles in zip(points, data["profiles"]):
+        point.update(hole_geometry(profiles))
     reached = float(cycles_to_limit(data["cycles"], [r["B_clearance_m"] for r in rows], LIMIT))
     life = {"metric": "B_clearance_m", "limit": LIMIT, "cycles_to_limit": reached if reached < float("inf") else None}
     OUT.joinpath("paper_wear.json").write_text(
@@ -70,6 +73,32 @@ def write_results(out: Path) -> None:
         )  # fmt: skip
     )
     _figures(out)
+
+
+def hole_geometry(profiles: dict, grid: int = 3600) -> dict:
+    """Where the worn holes stand against the contact's geometry (``Worn``'s docstring): per joint of
+    ``profiles`` (``joint -> (hole, pin)`` Fourier coefficients, m), the steepest slope of the hole's
+    wall against the radius, ``|w'| / R_h``; its least local radius of curvature ``R_h + w + w''``, m
+    (negative: the wall is convex there, a ridge); and the fraction of the circumference where that
+    radius is below ``R_p + c / 10``, where the contact law is handed ``R_p + c / 10`` instead (the
+    most conforming contact the model allows, whatever the wall's shape; the pin's own wear, under a
+    micrometre here, is left out of this bound)."""
+    import jax.numpy as jnp
+
+    import jaxcrank as jc
+    from jaxcrank.physics.wear import evaluate_profile
+
+    joints = jc.preset("paper-wear").joints
+    angles = jnp.linspace(0.0, 2.0 * jnp.pi, grid, endpoint=False)
+    out = {}
+    for j, (hole, _) in profiles.items():
+        law = joints[j]
+        s = evaluate_profile(jnp.asarray(hole), (jnp.cos(angles), jnp.sin(angles)))
+        rho = law.hole_radius + s.depth + s.bend
+        out[f"{j}_hole_max_slope"] = float(jnp.max(jnp.abs(s.slope)) / law.hole_radius)
+        out[f"{j}_hole_min_curvature_radius_m"] = float(jnp.min(rho))
+        out[f"{j}_hole_clamped_fraction"] = float(jnp.mean(rho < law.pin_radius + 0.1 * law.clearance))
+    return out
 
 
 def _figures(out: Path) -> None:
