@@ -79,10 +79,12 @@ def hole_geometry(profiles: dict, grid: int = 3600) -> dict:
     """Where the worn holes stand against the contact's geometry (``Worn``'s docstring): per joint of
     ``profiles`` (``joint -> (hole, pin)`` Fourier coefficients, m), the steepest slope of the hole's
     wall against the radius, ``|w'| / R_h``; its least local radius of curvature ``R_h + w + w''``, m
-    (negative: the wall is convex there, a ridge); and the fraction of the circumference where that
+    (negative: the wall is convex there, a ridge); the fraction of the circumference where that
     radius is below ``R_p + c / 10``, where the contact law is handed ``R_p + c / 10`` instead (the
     most conforming contact the model allows, whatever the wall's shape; the pin's own wear, under a
-    micrometre here, is left out of this bound)."""
+    micrometre here, is left out of this bound); and, over the dent's deepest half (where the wear
+    exceeds half its deepest), the fractions where the wall is more sharply curved than the pin
+    (``0 < radius < R_p``: a pin could not reach it) and where it is convex."""
     import jax.numpy as jnp
 
     import jaxcrank as jc
@@ -98,6 +100,11 @@ def hole_geometry(profiles: dict, grid: int = 3600) -> dict:
         out[f"{j}_hole_max_slope"] = float(jnp.max(jnp.abs(s.slope)) / law.hole_radius)
         out[f"{j}_hole_min_curvature_radius_m"] = float(jnp.min(rho))
         out[f"{j}_hole_clamped_fraction"] = float(jnp.mean(rho < law.pin_radius + 0.1 * law.clearance))
+        deep = s.depth > 0.5 * jnp.max(s.depth)
+        worn = bool(jnp.max(s.depth) > 0.0)
+        for name, where in (("tighter", (rho > 0.0) & (rho < law.pin_radius)), ("convex", rho <= 0.0)):
+            share = float(jnp.sum(where & deep) / jnp.sum(deep)) if worn else 0.0
+            out[f"{j}_hole_deepest_half_{name}_fraction"] = share
     return out
 
 

@@ -1002,12 +1002,15 @@ def table_paper_wear() -> str:
          f"{1e6 * p['C_hole_max_depth_m']:.1f}", f"{1e3 * p['B_clearance_m']:.4f}", f"{1e3 * p['C_clearance_m']:.4f}",
          fmt(p["rms_transmission_angle_error_deg"]), fmt(p["peak_contact_force_B_N"]),
          f"{p['B_hole_max_slope']:.3f}", f"{1e3 * p['B_hole_min_curvature_radius_m']:.2f}",
-         f"{100 * p['B_hole_clamped_fraction']:.0f}"]
+         f"{100 * p['B_hole_clamped_fraction']:.0f}",
+         f"{100 * p['B_hole_deepest_half_tighter_fraction']:.0f} / "
+         f"{100 * p['B_hole_deepest_half_convex_fraction']:.0f}"]
         for p in d["points"]
     ]  # fmt: skip
     head = ["cycles", "regime", "deepest wear, hole B [um]", "hole C [um]", "largest gap B [mm]", "gap C [mm]",
             "RMS transmission-angle error [deg]", "peak force B [N]", "hole B: steepest slope, w' / R",
-            "least radius of curvature [mm]", "wall under R_p + c/10 [% of the circle]"]  # fmt: skip
+            "least radius of curvature [mm]", "wall under R_p + c/10 [% of the circle]",
+            "deepest half of the dent: tighter than the pin / convex [%]"]  # fmt: skip
     life = d.get("life") or {}
     note = ""
     if life:
