@@ -418,6 +418,8 @@ def run_part(name: str, seed: int, budget: float, methods, path: Path, update: b
         earlier = json.loads(path.read_text())
         earlier["methods"] = {**_renamed(earlier["methods"]), **out}
         earlier.setdefault("updated", []).append({"methods": list(out), "machine": part["machine"]})
+        if any(m in OURS for m in out):  # ours ran again: with today's way in
+            earlier["way_in"] = WAY_IN
         part = earlier
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
@@ -504,6 +506,9 @@ def merge(parts_dir: Path, out: Path) -> dict:
         "problems": problems,
         "summary": summary,
     }
+    first = out.parent / "design_first_gradient.json"  # bench/design_first_gradient.py
+    if first.exists():
+        data["first_gradient"] = json.loads(first.read_text())
     out.write_text(json.dumps(data, indent=1, default=float))
     plot(data, out.with_suffix(".png"))
     return data
