@@ -437,10 +437,12 @@ def _steady_programs(problem: AbstractProblem, evaluator: SteadyEvaluator):
 
 
 def _guarded(problem: AbstractProblem, guard, evaluator, u, u_new):
-    """``u_new``, or the step from ``u`` halved until ``guard`` accepts its design (at
-    most ``guard.max_halvings`` times; then ``u`` is held), and the number of halvings."""
+    """``u_new``, or the step from ``u`` halved until ``guard`` accepts its design (at most ``guard.max_halvings``
+    times; then ``u`` is held, its steady state kept past the trials': not solved again), and the halvings."""
     if guard is None:
         return u_new, 0
+    if hasattr(evaluator, "warm_from"):
+        evaluator.warm_from(np.asarray(problem.from_unit(u)))
     for k in range(guard.max_halvings + 1):
         if guard.accept(evaluator, np.asarray(problem.from_unit(u_new))):
             return u_new, k

@@ -251,6 +251,39 @@ def test_regime_guard_halves_a_step_that_leaves_the_periodic_regime_then_holds()
 CHEAP = Pathwise(t_start=0.0, t_end=2e-3)
 
 
+def test_a_held_iterate_keeps_its_steady_state_through_the_refused_trials(monkeypatch):
+    """When the regime guard refuses every halving of a step, the iterate is held; its steady
+    state must outlive the refused trials' (more than the evaluator's cache of the last few
+    designs), so the next evaluation there is not a new solve, which near a regime's edge can
+    land in another regime (the design family's mid_slow problem: the optimiser then stopped at a
+    held iterate that a re-solve called not periodic)."""
+    from types import SimpleNamespace
+
+    from optim.optimize import _guarded
+    from optim.steady import RegimeGuard, Steady, SteadyEvaluator
+
+    solved = []
+
+    def solve(self, mech, warm_start=None):
+        solved.append(float(mech.crank_length))
+        periodic = float(mech.crank_length) < 0.1201
+        return SimpleNamespace(
+            periodic=periodic, revolutions={"settle": 20}, ok=True, regime="periodic" if periodic else "not periodic"
+        )
+
+    monkeypatch.setattr(Steady, "solve", solve)
+    prob = paper_problem(Steady())
+    ev = SteadyEvaluator(prob)
+    u = jnp.asarray(prob.to_unit(jnp.array([0.12, 0.40])))
+    held = ev.steady_at(np.asarray(prob.from_unit(u)))
+    assert held.periodic and len(solved) == 1
+    u_new, halvings = _guarded(
+        prob, RegimeGuard(max_halvings=3), ev, u, jnp.asarray(prob.to_unit(jnp.array([0.13, 0.40])))
+    )
+    assert np.array_equal(np.asarray(u_new), np.asarray(u)) and halvings == 4 and len(solved) == 5
+    assert ev.steady_at(np.asarray(prob.from_unit(u_new))) is held and len(solved) == 5  # found, not solved again
+
+
 def test_a_warm_start_that_meets_no_attracting_orbit_is_classified_again_from_rest(monkeypatch):
     """The steady-state evaluator warm-starts from the last periodic orbit; when that solve
     ends not periodic after a single period of settle (its shooting met an unstable orbit,
