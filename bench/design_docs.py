@@ -431,18 +431,18 @@ def verdict(d) -> list[str]:
         )
     lines.append("")
     worst, best = summ["worst"], summ["best"]
+    missed = [c for c in summ["cases"] if _meets(c) != "met"]
+    never = summ["ours_never_within_1pct"]
     if worst is None:
         words = (
             "In no case did ours get within 1 % of the best held-out value in its budget, so no speedup is measured."
         )
-    else:
+    elif not never:
         words = (
             f"Worst case: {worst['problem']}, seed {worst['seed']}, speedup {_speedup(worst)} ({_meets(worst)}). "
             f"Best case: {best['problem']}, seed {best['seed']}, speedup {_speedup(best)} ({_meets(best)})."
         )
-    missed = [c for c in summ["cases"] if _meets(c) != "met"]
-    never = summ["ours_never_within_1pct"]
-    if never and worst is not None:  # no speedup at all is worse than the smallest one
+    else:  # no speedup at all is worse than the smallest one
         words = (
             "Worst cases: ours never got within 1 % on "
             + ", ".join(f"{c['problem']} seed {c['seed']}" for c in never)

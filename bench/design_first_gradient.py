@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -104,6 +105,8 @@ def main(argv=None) -> int:
     from _common import machine
     from bench_design import PROBLEMS
 
+    from jaxcrank.runs.sweep_table import atomic_write
+
     data = json.loads(args.out.read_text()) if args.resume and args.out.exists() else {"runs": []}
     done = {(r["problem"], r["cache"]) for r in data["runs"]}
     if not args.resume and args.work.exists():
@@ -115,7 +118,7 @@ def main(argv=None) -> int:
             continue
         folder = args.work / ("family" if label == "family" else name)
         if label == "family" and not folder.exists():  # the family's folder starts as the preset's, warm
-            subprocess.run(["cp", "-r", str(args.work / FAMILY_FIRST), str(folder)], check=True)
+            shutil.copytree(args.work / FAMILY_FIRST, folder)
         row = {**_run(name, folder, args.core), "cache": label}
         data["runs"].append(row)
         data.update(
@@ -124,9 +127,7 @@ def main(argv=None) -> int:
             machine=machine(load_average=list(os.getloadavg())),
         )
         args.out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = args.out.with_suffix(".tmp")
-        tmp.write_text(json.dumps(data, indent=1, default=float))
-        tmp.replace(args.out)
+        atomic_write(args.out, lambda f: f.write(json.dumps(data, indent=1, default=float).encode()))
         print(f"{name} {label}: first gradient at {row['first_gradient_cpu_s']} CPU-s", flush=True)
     return 0
 

@@ -88,7 +88,7 @@ def hole_geometry(profiles: dict, grid: int = 3600) -> dict:
     import jax.numpy as jnp
 
     import jaxcrank as jc
-    from jaxcrank.physics.wear import evaluate_profile
+    from jaxcrank.physics.wear import CONFORMING_GAP, evaluate_profile
 
     joints = jc.preset("paper-wear").joints
     angles = jnp.linspace(0.0, 2.0 * jnp.pi, grid, endpoint=False)
@@ -99,7 +99,7 @@ def hole_geometry(profiles: dict, grid: int = 3600) -> dict:
         rho = law.hole_radius + s.depth + s.bend
         out[f"{j}_hole_max_slope"] = float(jnp.max(jnp.abs(s.slope)) / law.hole_radius)
         out[f"{j}_hole_min_curvature_radius_m"] = float(jnp.min(rho))
-        out[f"{j}_hole_clamped_fraction"] = float(jnp.mean(rho < law.pin_radius + 0.1 * law.clearance))
+        out[f"{j}_hole_clamped_fraction"] = float(jnp.mean(rho < law.pin_radius + CONFORMING_GAP * law.clearance))
         deep = s.depth > 0.5 * jnp.max(s.depth)
         worn = bool(jnp.max(s.depth) > 0.0)
         for name, where in (("tighter", (rho > 0.0) & (rho < law.pin_radius)), ("convex", rho <= 0.0)):

@@ -663,15 +663,14 @@ def design_headline(design: dict) -> list[str]:
         never = []
     else:
         bounds = summary["worst"]["speedup_is_lower_bound"] or summary["best"]["speedup_is_lower_bound"]
+        # the worst first: no speedup at all
+        n = f"{len(never)} of {len(summary['cases'])} cases"
+        lead = f"ours not within 1 % of the best held-out value in {n}; elsewhere"
         value = (
-            "ours within 1 % of the best held-out value: speedup over the best gradient-free method "
-            f"worst {case(summary['worst'])}, best {case(summary['best'])}"
+            f"{lead if never else 'ours'} within 1 % of the best held-out value: speedup over the best gradient-free "
+            f"method worst {case(summary['worst'])}, best {case(summary['best'])}"
             + (" (lower bounds marked >)" if bounds else "")
         )
-    if never:  # the worst first: no speedup at all
-        n = f"{len(never)} of {len(summary['cases'])} cases"
-        elsewhere = value.replace("ours within", "elsewhere within", 1)
-        value = f"ours not within 1 % of the best held-out value in {n}; {elsewhere}"
     problems, seeds = len(design["problems"]), len(design["seeds"])
     return [
         f"design head-to-head on the steady state, {design['problems'][0]['n_variables']} variables, "

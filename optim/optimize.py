@@ -441,8 +441,7 @@ def _guarded(problem: AbstractProblem, guard, evaluator, u, u_new):
     times; then ``u`` is held, its steady state kept past the trials': not solved again), and the halvings."""
     if guard is None:
         return u_new, 0
-    if hasattr(evaluator, "warm_from"):
-        evaluator.warm_from(np.asarray(problem.from_unit(u)))
+    evaluator.warm_from(np.asarray(problem.from_unit(u)))
     for k in range(guard.max_halvings + 1):
         if guard.accept(evaluator, np.asarray(problem.from_unit(u_new))):
             return u_new, k

@@ -229,6 +229,9 @@ class _FakeEvaluator:
         self.asked.append(np.asarray(x))
         return "periodic" if float(self.problem.to_unit(x)[0]) < 0.5 else "not periodic"
 
+    def warm_from(self, x):
+        """Nothing to keep: a regime here is a rule, not a solve."""
+
 
 def test_regime_guard_halves_a_step_that_leaves_the_periodic_regime_then_holds():
     from optim.optimize import _guarded

@@ -47,6 +47,9 @@ from .safemath import perp, safe_norm
 #: Fourier modes of a worn profile by default: a patch of half-width b on a radius R is
 #: resolved to about m b / R = 1 at the paper's loads
 DEFAULT_MODES = 24
+#: the least difference of the local radii of curvature (hole's less pin's) the contact law is
+#: handed, in clearances: a worn patch that conforms to the pin stays a finite stiffness
+CONFORMING_GAP = 0.1
 
 
 def new_profile(modes: int = DEFAULT_MODES) -> Float[Array, " 2M+1"]:
@@ -311,7 +314,7 @@ def worn_contact(joint: Worn, kin: JointKinematics, state) -> JointForces:
     v_t = jnp.dot(tangent, v_rel) + kin.pin_angular_velocity * lever_p - kin.hole_angular_velocity * lever_h
     rho_h = r_h + cp.hole.depth + cp.hole.bend
     rho_p = r_p - cp.pin.depth - cp.pin.bend
-    rho_h = jnp.maximum(rho_h, rho_p + 0.1 * joint.clearance)
+    rho_h = jnp.maximum(rho_h, rho_p + CONFORMING_GAP * joint.clearance)
 
     return contact_forces(
         joint, kin, state, cp.eccentricity, n, cp.normal, delta, delta_dot, v_t, (rho_h, rho_p), (lever_h, lever_p)
