@@ -176,11 +176,13 @@ def report(steady: S.SteadyState) -> dict:
 
 def warm_solve(solve, last, settle_revolutions: int, again: bool = True) -> S.SteadyState:
     """The steady state ``solve(warm_start)`` finds warm-started from ``last`` (the last periodic
-    one, or None); a warm start that finds no orbit without a full settle of
-    ``settle_revolutions`` is redone from rest (``solve(None)``) when ``again``."""
+    one, or None). When ``again``, a warm start is redone from rest (``solve(None)``) where it
+    found no orbit without a full settle of ``settle_revolutions``, and where its solve failed
+    even after one: that settle began at the warm start, not at rest, and the motion from rest
+    can settle onto another attractor."""
     steady = solve(last)
     settled = steady.revolutions.get("settle", 0) >= settle_revolutions
-    if again and last is not None and not steady.periodic and not settled:
+    if again and last is not None and not steady.periodic and (not settled or not steady.ok):
         steady = solve(None)
     return steady
 

@@ -291,7 +291,8 @@ def test_a_warm_start_that_meets_no_attracting_orbit_is_classified_again_from_re
     """The steady-state evaluator warm-starts from the last periodic orbit; when that solve
     ends not periodic after a single period of settle (its shooting met an unstable orbit,
     as on the four-bar preset after Adam's first step), the design is solved again from rest
-    and its regime is the motion's from rest. A not-periodic result after a full settle is kept."""
+    and its regime is the motion's from rest. A not-periodic result after a full settle is kept;
+    a failed one is solved again from rest."""
     from types import SimpleNamespace
 
     from optim.steady import Steady, SteadyEvaluator
@@ -312,9 +313,20 @@ def test_a_warm_start_that_meets_no_attracting_orbit_is_classified_again_from_re
     assert ev.steady_at(np.array([0.121, 0.40])).periodic and calls[3:] == ["warm"]
     # a warm start that settled fully and is still not periodic is believed
     monkeypatch.setattr(
-        Steady, "solve", lambda self, mech, warm_start=None: SimpleNamespace(periodic=False, revolutions={"settle": 21})
+        Steady,
+        "solve",
+        lambda self, mech, warm_start=None: SimpleNamespace(periodic=False, revolutions={"settle": 21}, ok=True),
     )
     assert not ev.steady_at(np.array([0.122, 0.40])).periodic
+    # ... but not one whose solve failed after that settle: the settle began at the warm start
+    calls.clear()
+
+    def failing_when_warm(self, mech, warm_start=None):
+        calls.append("warm" if warm_start is not None else "rest")
+        return SimpleNamespace(periodic=warm_start is None, revolutions={"settle": 21}, ok=warm_start is None)
+
+    monkeypatch.setattr(Steady, "solve", failing_when_warm)
+    assert ev.steady_at(np.array([0.123, 0.40])).periodic and calls == ["warm", "rest"]
 
 
 def test_a_kept_steady_state_outlives_the_cache_and_becomes_the_warm_start_again(monkeypatch):
