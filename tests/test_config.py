@@ -2,6 +2,7 @@
 and every mechanism goes to TOML and back (jaxcrank.runs.codec)."""
 
 import math
+from pathlib import Path
 
 import equinox as eqx
 import pytest
@@ -15,6 +16,7 @@ from jaxcrank.physics.presets import paper_guide
 from jaxcrank.runs import config
 
 get_parameter, set_parameter = jc.get_parameter, jc.set_parameter
+DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 
 @pytest.mark.parametrize("name", ["clearance_B", "clearance_C"])
@@ -56,6 +58,20 @@ def test_tied_overrides_match_the_library(name, value):
     mech = config.apply_overrides(jc.paper(), [f"{name}={value!r}"])
     assert eqx.tree_equal(mech, set_parameter(jc.paper(), name, value)) is True
     assert get_parameter(mech, f"joints.B.{name}") == get_parameter(mech, f"joints.C.{name}") == value
+
+
+@pytest.mark.parametrize("name", ["bodies.coupler.points.B.x", "bodies.coupler.centre_of_mass.y", "ground.O4.x"])
+def test_a_coordinate_override_matches_the_library(name):
+    """``--set bodies.coupler.points.B.x=...`` sets that coordinate of a written-out linkage, as
+    set_parameter's name does, and leaves the other coordinate."""
+    base = config.load(DOCS / "linkages" / "crank-rocker.toml")
+    value = get_parameter(base, name) + 0.01
+    mech = config.apply_overrides(base, [f"{name}={value!r}"])
+    assert config.to_dict(mech) == config.to_dict(set_parameter(base, name, value))
+    other = name[:-1] + ("y" if name.endswith("x") else "x")
+    assert get_parameter(mech, other) == get_parameter(base, other)
+    with pytest.raises(ParameterError, match="ground.O4"):
+        config.apply_overrides(base, ["ground.O4.z=0.4"])
 
 
 def test_a_guides_clearance_is_its_gap():

@@ -267,13 +267,20 @@ def _outputs(table, path) -> Outputs:
 
 def merge(base: dict, changes: dict) -> dict:
     """``base`` updated by ``changes``, table by table. A table whose law or type (``law``, ``type``) changes is
-    replaced, not merged (another law has other settings): ``base`` itself too."""
+    replaced, not merged (another law has other settings): ``base`` itself too. A change ``{x = ..}`` or
+    ``{y = ..}`` of a point (a pair of numbers in ``base``) sets that coordinate, as the parameter name
+    ``bodies.rod.points.C.x`` does."""
     if any(key in changes and key in base and changes[key] != base[key] for key in ("law", "type")):
         return dict(changes)
     out = dict(base)
     for k, v in changes.items():
         old = out.get(k)
-        out[k] = merge(old, v) if isinstance(v, dict) and isinstance(old, dict) else v
+        if isinstance(v, dict) and isinstance(old, dict):
+            out[k] = merge(old, v)
+        elif isinstance(v, dict) and v and set(v) <= {"x", "y"} and isinstance(old, (list, tuple)) and len(old) == 2:
+            out[k] = [v.get("x", old[0]), v.get("y", old[1])]
+        else:
+            out[k] = v
     return out
 
 
