@@ -4,7 +4,8 @@ mechanism's parameters against a measured trace ([`optim.fit.fit`][]).
 The config file (TOML; SI units):
 
 ```toml
-mechanism = "paper"            # a preset's name, or a [mechanism] table as config.toml writes it
+mechanism = "paper"            # a preset's name, or a [mechanism] table as config.toml writes it,
+                               # or [mechanism] file = "my_linkage.toml" (beside this file)
 
 [parameters.clearance_B]       # any name jaxcrank.set_parameter accepts
 start = 2.1e-4
@@ -71,12 +72,18 @@ def add_arguments(p):
     return p
 
 
-def _mechanism(value):
+def _mechanism(value, folder: Path):
     """The base mechanism of the config's ``mechanism`` key: a preset's name, or a table (its
-    own ``mechanism`` key may name a preset, whose values the table's others change)."""
+    own ``mechanism`` key may name a preset, whose values the table's others change; or
+    ``preset = NAME`` or ``file = "linkage.toml"``, relative to ``folder``, as in a design
+    problem file, with the table's other keys as changes)."""
     from jaxcrank.physics.presets import PRESETS, preset
     from jaxcrank.runs import codec, config
 
+    if isinstance(value, dict) and ("file" in value or "preset" in value):
+        from .spec import mechanism_section
+
+        return mechanism_section(value, folder)
     if isinstance(value, dict) and value.get("mechanism") in PRESETS and value["mechanism"] not in codec.KINDS:
         rest = {k: v for k, v in value.items() if k != "mechanism"}
         base = preset(value["mechanism"])
@@ -93,8 +100,9 @@ def _numbers(table: dict, section: str, valid) -> dict:
     return dict(table)
 
 
-def build(cfg: dict) -> dict:
-    """The fit a config dict describes (module docstring): ``mechanism``, ``parameters``
+def build(cfg: dict, folder: Path | str = ".") -> dict:
+    """The fit a config dict describes (module docstring; ``folder``: where a ``[mechanism]``
+    ``file`` is looked for, the config file's): ``mechanism``, ``parameters``
     ([`FitParameter`][optim.calibrate.FitParameter]s), ``signal``, ``noise``, ``settings``
     ([`LMSettings`][optim.least_squares.LMSettings]), ``options`` (SteadyOptions) and the
     ``[fit]`` extras.
@@ -105,7 +113,7 @@ def build(cfg: dict) -> dict:
     bad = sorted(set(cfg) - set(SECTIONS))
     if bad:
         raise ParameterError(f"unknown fit config keys {bad}; valid: {', '.join(SECTIONS)}")
-    mech = _mechanism(cfg.get("mechanism"))
+    mech = _mechanism(cfg.get("mechanism"), Path(folder))
     table = cfg.get("parameters") or {}
     if not isinstance(table, dict) or not table:
         raise ParameterError(
@@ -236,7 +244,7 @@ def run(args) -> int:
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{args.config}: malformed TOML: {err}") from None
     try:
-        spec = build(cfg)
+        spec = build(cfg, Path(args.config).parent)
     except ParameterError as err:
         raise ParameterError(f"{args.config}: {err}") from None
     trace = read_trace(args.data, spec["signal"])

@@ -55,8 +55,9 @@ class AbstractProblem(abc.ABC):
             joints are a dict), set on construction; problems compare and hash by it.
 
     Raises:
-        ParameterError: on construction, for inconsistent sizes, empty bounds, an
-            unknown variable, a negative cost weight or one without clearance variables.
+        ParameterError: on construction, for inconsistent sizes, empty bounds, a start outside
+            its bounds, an unknown variable, a negative cost weight or one without clearance
+            variables.
     """
 
     base: Mechanism = dataclasses.field(compare=False)
@@ -98,6 +99,11 @@ class AbstractProblem(abc.ABC):
             raise ParameterError("cost_weight > 0 needs a clearance variable (clearance_<joint>) among the variables")
         if self.start is not None and len(self.start) != n:
             raise ParameterError(f"start needs {n} values")
+        for name, lo, hi, s in zip(self.names, self.lower, self.upper, self.start or [None] * n):
+            if s is not None and not lo <= s <= hi:
+                raise ParameterError(
+                    f"start of {name!r}: {s:g} is outside its bounds [lower, upper] = [{lo:g}, {hi:g}]"
+                )
         self.check()
 
     # ------------------------------------------------------------------ what a subclass says

@@ -103,9 +103,15 @@ def _life(table) -> LifeSpec:
 # ---------------------------------------------------------------------------------------- the file
 
 
-def _mechanism(section: dict, folder: Path, wear=()):
-    """The ``[mechanism]`` table's mechanism; the joints in ``wear`` made worn before the table's
-    settings apply to the preset or file (so that they can set the wear law's values)."""
+def mechanism_section(section: dict, folder: Path, wear=()):
+    """The ``[mechanism]`` table's mechanism (``preset = NAME``, ``file = PATH`` relative to
+    ``folder``, or the mechanism written out; the table's other keys change the preset or file);
+    the joints in ``wear`` made worn before the table's settings apply to the preset or file (so
+    that they can set the wear law's values).
+
+    Raises:
+        ParameterError: both preset and file, an empty table, or a bad mechanism (the message
+            names it)."""
     from jaxcrank.numerics.wear_run import with_wear
 
     section = dict(section)
@@ -157,7 +163,7 @@ def from_dict(data: dict, folder: Path = Path(".")) -> tuple[DesignProblem, dict
         if need not in data:
             raise ParameterError(f"problem file: the [{need}] table is missing")
     life = _life(data["life"]) if "life" in data else None
-    base = _mechanism(data["mechanism"], folder, life.wear if life is not None else ())
+    base = mechanism_section(data["mechanism"], folder, life.wear if life is not None else ())
     if life is not None:
         from jaxcrank.numerics.wear_run import worn_joints
 

@@ -9,6 +9,8 @@ exact Jacobian of the residuals against central differences of steady states, a 
 trace recovered from a start a few % off, and the command writing its files."""
 
 import json
+import tomllib
+from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -181,6 +183,25 @@ def test_fit_command_refuses_a_bad_config_naming_the_key(tmp_path, capsys):
         argv = ["fit", "--config", str(tmp_path / "fit.toml"), "--data", str(tmp_path / "trace.csv")]
         assert main(argv + ["--out", str(tmp_path / "out"), "--quiet"]) == 2, label
         assert word in capsys.readouterr().err, label
+
+
+def test_fit_config_takes_a_linkage_file_beside_it_as_a_problem_file_does(tmp_path):
+    """``[mechanism] file = "linkage.toml"`` (relative to the config) and ``preset = NAME``, with
+    the table's other keys as changes, as in a design problem file."""
+    from jaxcrank.runs import config
+    from optim.fit_cli import build
+
+    docs = Path(__file__).resolve().parents[1] / "docs" / "linkages"
+    (tmp_path / "rocker.toml").write_text((docs / "crank-rocker.toml").read_text())
+    params = "[parameters.gravity]\nstart = 9.8\nlower = 9\nupper = 10\n"
+    cfg = tomllib.loads('[mechanism]\nfile = "rocker.toml"\ngravity = 1.5\n' + params)
+    mech = build(cfg, tmp_path)["mechanism"]
+    expected = config.apply_overrides(config.load(docs / "crank-rocker.toml"), ["gravity=1.5"])
+    assert config.to_dict(mech) == config.to_dict(expected)
+    cfg = tomllib.loads('[mechanism]\npreset = "paper"\nclearance_B = 2e-4\n' + params)
+    assert jc.get_parameter(build(cfg)["mechanism"], "clearance_B") == pytest.approx(2e-4, rel=1e-12)
+    with pytest.raises(ParameterError, match="nowhere.toml"):
+        build(tomllib.loads('[mechanism]\nfile = "nowhere.toml"\n' + params), tmp_path)
 
 
 # ----------------------------------------------------------------------------- with the simulator

@@ -111,6 +111,14 @@ def test_a_linkage_that_cannot_be_assembled_at_its_start_angle():
     assert "cannot be assembled at its start angle 0 deg" in message
 
 
+def test_a_crank_of_zero_length():
+    """A driven body whose other joint sits on its ground pivot turns alone: refused, naming
+    the body and its points."""
+    crank = jc.Body(0.5, 4.2e-4, {"O2": jc.Point(), "A": jc.Point()}, jc.Point(0.05, 0.0))
+    message = _refused(lambda: _compiled(bodies={"crank": crank}), "'crank'", "A", "'O2'")
+    assert "zero length" in message
+
+
 def test_a_driver_on_a_body_not_attached_to_the_ground():
     driver = jc.ConstantSpeed(body="coupler", speed=62.83)
     message = _refused(lambda: _compiled(driver=driver), "'coupler'")

@@ -68,8 +68,10 @@ def check_assembly(lk: Linkage, plan: Plan, signs, samples: int = 360) -> None:
     NumPy over the turn; a plan with groups is checked at its dyads before the first group.
 
     Raises:
-        ParameterError: naming the dyad's joints and the angle.
+        ParameterError: naming the dyad's joints and the angle; or the driven body's joints, when
+            every one of them sits on its ground pivot (a crank of zero length turns alone).
     """
+    _check_crank_length(lk, plan)
     dyads = []
     for step in plan.steps:
         if isinstance(step, Group):
@@ -101,6 +103,27 @@ def check_assembly(lk: Linkage, plan: Plan, signs, samples: int = 360) -> None:
             f"the linkage locks at driver angle {np.degrees(phis[i]):.1f} deg: the links of joints "
             f"{step.outer}, {step.middle}, {step.other} cannot reach each other there, so the driven body "
             f"{lk.driver.body!r} cannot make a full turn (check the lengths)"
+        )
+
+
+def _check_crank_length(lk: Linkage, plan: Plan) -> None:
+    """The driven body turning on its ground pivot must carry another joint off the pivot."""
+    if plan.pivot is None:
+        return
+    sites = [site for c in lk.connections.values() for site in c.sites() if site.body == plan.driven]
+    here = next(site.point for site in lk.connections[plan.pivot].sites() if site.body == plan.driven)
+    others = sorted({site.point for site in sites if site.point != here})
+    points = lk.bodies[plan.driven].points
+
+    def distance(name):
+        a, b = points[name], points[here]
+        return np.hypot(np.asarray(a.x, dtype=float) - np.asarray(b.x), np.asarray(a.y, dtype=float) - np.asarray(b.y))
+
+    if others and all(np.any(distance(p) == 0.0) for p in others):
+        raise ParameterError(
+            f"the driven body {plan.driven!r}: its point(s) {', '.join(others)} sit on its ground pivot "
+            f"{here!r} (distance 0 m), so it turns without moving the linkage (a crank of zero length): "
+            "move them off the pivot"
         )
 
 

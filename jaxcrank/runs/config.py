@@ -109,12 +109,15 @@ def from_dict(data: dict, base: AbstractMechanism | None = None) -> AbstractMech
 
 
 def load_toml(path, build):
-    """``build(dict)`` of a TOML file; ParameterErrors (and malformed TOML) name the file."""
+    """``build(dict)`` of a TOML file; ParameterErrors (and a file that cannot be read or is malformed TOML)
+    name the file."""
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{path}: malformed TOML: {err}") from None
+    except OSError as err:
+        raise ParameterError(f"{path}: cannot be read: {err.strerror or err}") from None
     try:
         return build(data)
     except ParameterError as err:
