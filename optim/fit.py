@@ -127,6 +127,25 @@ def _progress(names, params):
     return line
 
 
+#: a trace's first revolution whose RMS residual exceeds its last's by this factor is noted as a start-up
+TRANSIENT_RATIO = 2.0
+
+
+def _transient(turns: np.ndarray, misfit: np.ndarray) -> list[str]:
+    """A note when the residuals (signal units) of the trace's first revolution exceed its last's
+    by `TRANSIENT_RATIO` in RMS: a start-up the steady orbit does not have; else none."""
+    if turns.max(initial=0) < 1 or not np.all(np.isfinite(misfit)):
+        return []
+    first, last = (float(np.sqrt(np.mean(misfit[turns == k] ** 2))) for k in (0, turns.max()))
+    if not first > TRANSIENT_RATIO * last:
+        return []
+    return [
+        f"the residuals fall over the trace (RMS {first:.4g} in its first revolution, {last:.4g} in its last, "
+        f"revolution {turns.max() + 1}; signal units): it may begin with a start-up (a run from rest does) that "
+        "the steady orbit does not have, which biases the fit and its intervals; fit the revolutions after it"
+    ]
+
+
 def fit(
     base,
     parameters: Sequence[FitParameter],
@@ -225,6 +244,7 @@ def fit(
         )
     if not converged:
         notes.append(f"not converged: {stop}")
+    notes += _transient(cal.turns, final.residuals * cal.noise)
     for name, ok, why in zip(names, iv.identifiable, iv.reasons):
         if not ok and final.regime == PERIODIC:
             notes.append(f"{name} not identifiable: {why}")

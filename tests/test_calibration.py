@@ -204,6 +204,23 @@ def test_fit_config_takes_a_linkage_file_beside_it_as_a_problem_file_does(tmp_pa
         build(tomllib.loads('[mechanism]\nfile = "nowhere.toml"\n' + params), tmp_path)
 
 
+def test_a_start_up_in_the_trace_is_noted():
+    """Residuals whose first revolution is more than TRANSIENT_RATIO times its last in RMS (a
+    trace that begins with the start-up of a run from rest) get a note; noise alike in every
+    revolution, a one-revolution trace and non-finite residuals get none."""
+    from optim.fit import TRANSIENT_RATIO, _transient
+
+    rng = np.random.default_rng(0)
+    turns = np.repeat(np.arange(3), 90)
+    steady = np.tile(rng.standard_normal(90), 3)  # the same residuals in every revolution
+    assert _transient(turns, steady) == []
+    start_up = steady * np.where(turns == 0, 1.1 * TRANSIENT_RATIO, 1.0)
+    (note,) = _transient(turns, start_up)
+    assert "start-up" in note and "revolution 3" in note
+    assert _transient(np.zeros(90, int), steady[:90]) == []
+    assert _transient(turns, np.where(turns == 0, np.nan, steady)) == []
+
+
 # ----------------------------------------------------------------------------- with the simulator
 
 #: a cheap periodic case: the paper's mechanism with clearance at B only (its pin settles onto a
@@ -292,6 +309,7 @@ def test_fit_command_recovers_a_noise_free_trace_and_writes_fit_json_csv_and_fig
     assert result["misfit_final"] < 1e-10 < result["misfit_start"] and result["cpu_seconds"] > 0
     assert result["condition_number"] > 1.0 and len(result["singular_values"]) == 2
     assert len((out / "fit.csv").read_text().splitlines()) == 2 + result["iterations"]
+    assert not any("start-up" in note for note in result["notes"])
 
 
 def test_a_killed_fit_resumes_from_its_last_accepted_iterate(tmp_path):
