@@ -4,8 +4,10 @@ minimised under its constraints ([`optim.constrained`][]).
 The run folder gets ``problem.toml`` (a copy of the file), ``round_NN/`` (each round's
 checkpoint and history), ``rounds.json`` (the finished rounds: ``--resume`` continues after
 them), ``history.csv`` (every iterate with each term's and constraint's value, units in the
-quantity's name), ``history.png`` (the objective and each constraint per iterate, its bounds
-shaded) and ``result.json``:
+quantity's name; the objective ``f`` in the terms' unit; the optimiser's ``merit``, dimensionless:
+the round's augmented Lagrangian, the objective over its reference plus the constraints' penalty,
+and its gradient ``grad_merit_<variable>_per_SI``), ``history.png`` (the objective and each
+constraint per iterate, its bounds shaded) and ``result.json``:
 
 - ``problem``, ``names``, ``method``, ``feasible`` (every constraint holds at the final design);
 - ``objective_start`` and ``objective_final`` (the weighted sum of the terms + cost);
@@ -16,7 +18,8 @@ shaded) and ``result.json``:
 - ``start_design_SI``, ``final_design_SI``, ``final_parameters_SI`` (every mechanism parameter the
   design sets, derived lengths' points and mass properties included), ``final_mechanism`` and
   ``simulate_command`` (as ``jaxcrank optimize`` writes them for a preset problem);
-- ``rounds`` (the augmented Lagrangian's), ``iterations``, ``start_search`` (the way in) and
+- ``rounds`` (the augmented Lagrangian's), ``iterations``, ``start_search`` (the way in; each
+  candidate's ``merit`` as in ``history.csv``) and
   ``seconds`` (``way_in``, ``gradient_compile``, ``first_gradient``, ``total``) and
   ``time_to_first_gradient_s`` (from the evaluator's making to its first exact gradient, the way in
   included; None without one).
@@ -80,7 +83,7 @@ def run(args) -> int:
         res = solve_for_life(problem, life, opt, rounds, out=out, resume=args.resume, progress=not args.quiet)
     else:
         res = constrained.solve(problem, opt, rounds, out=out, resume=args.resume, progress=not args.quiet)
-    write_history(out / "history.csv", res["history"])
+    write_history(out / "history.csv", [_merit_named(h) for h in res["history"]])
     plot_history(problem, res["history"], out / "history.png")
     start, final = res["start"], res["final"]
     result = {
@@ -100,7 +103,7 @@ def run(args) -> int:
         **_final_mechanism(problem, final["design_SI"], out),
         "rounds": res["rounds"],
         "iterations": len(res["history"]),
-        "start_search": res["start_search"],
+        "start_search": _search_merit_named(res["start_search"]),
         "seconds": res["seconds"],
         "time_to_first_gradient_s": res["seconds"].get("first_gradient"),
     }
@@ -150,6 +153,30 @@ def run_front(args, path: Path, problem, tables: dict) -> int:
         f"hypervolume {state['hypervolume']:.6g}; {out / 'pareto.csv'}, {out / 'pareto.png'}"
     )
     return 0
+
+
+#: the optimiser's columns, named for a preset problem's objective in degrees, as the augmented
+#: Lagrangian's: ``merit`` is dimensionless (the round's objective over its reference plus the
+#: constraints' penalty; 1 at the round's start), its gradient per SI unit of each variable
+_MERIT = {"objective_deg": "merit", "objective_without_cost_deg": "merit_without_cost", "cost_deg": "cost"}
+
+
+def _merit_named(row: dict) -> dict:
+    """A history row of a problem file's run with the optimiser's columns named as `_MERIT` says."""
+    out = {}
+    for k, v in row.items():
+        if k.startswith("grad_") and k.endswith("_deg_per_SI"):
+            k = "grad_merit_" + k[len("grad_") : -len("_deg_per_SI")] + "_per_SI"
+        out[_MERIT.get(k, k)] = v
+    return out
+
+
+def _search_merit_named(search: dict | None) -> dict | None:
+    """The way in's record with each candidate's ``value_deg`` named ``merit`` (dimensionless)."""
+    if not search:
+        return search
+    named = [{("merit" if k == "value_deg" else k): v for k, v in c.items()} for c in search.get("classified", [])]
+    return {**search, "classified": named}
 
 
 def write_history(path: Path, history: list[dict]) -> None:

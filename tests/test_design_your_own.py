@@ -58,3 +58,5 @@ def test_the_page_problem_runs_to_a_design_that_satisfies_every_constraint(tmp_p
     assert res["objective_final"] < res["objective_start"]
     for name in ("history.csv", "history.png", "rounds.json", "problem.toml"):
         assert (out / name).exists(), name
+    header = (out / "history.csv").read_text().splitlines()[0].split(",")
+    assert {"f", "merit", "term:peak_contact_force_B_N"} <= set(header) and "objective_deg" not in header

@@ -193,6 +193,19 @@ def test_a_bad_problem_file_names_what_is_wrong(changes, match):
         _problem(**changes)
 
 
+def test_a_problem_files_history_names_the_merit_without_a_unit():
+    """The optimiser's columns of a problem file's run are the augmented Lagrangian's
+    (dimensionless), not degrees: ``merit``, ``grad_merit_<variable>_per_SI``; the way in's
+    candidates carry ``merit`` too."""
+    from optim.file_cli import _merit_named, _search_merit_named
+
+    row = {"objective_deg": 1.0, "cost_deg": 0.0, "grad_L_deg_per_SI": 2.0, "L_SI": 0.3, "f": 3000.0}
+    assert _merit_named(row) == {"merit": 1.0, "cost": 0.0, "grad_merit_L_per_SI": 2.0, "L_SI": 0.3, "f": 3000.0}
+    search = {"classified": [{"value_deg": 1.0, "regime": "periodic"}], "chosen": 0}
+    assert _search_merit_named(search) == {"classified": [{"merit": 1.0, "regime": "periodic"}], "chosen": 0}
+    assert _search_merit_named(None) is None
+
+
 def test_the_augmented_lagrangian_gradient_is_its_derivative():
     """On outputs that are linear in the design (values o0 + J x), the evaluator's augmented
     Lagrangian gradient from (outputs, J) equals central differences of its value, active and
