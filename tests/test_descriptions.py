@@ -209,6 +209,13 @@ def _errors():
     def rename(d):
         d["bodies"]["rocker"]["mas"] = d["bodies"]["rocker"].pop("mass")
 
+    def lubricated_without_length(d):
+        d["joints"]["B"].update(law="lubricated", viscosity=0.05)
+        d["joints"]["B"].pop("length", None)
+
+    def zero_crank(d):
+        d["bodies"]["crank"]["points"]["A"] = list(d["bodies"]["crank"]["points"]["O2"])
+
     return [
         (set_(("joints", "B", "pin"), "rokker.B"), "a joint on a body that does not exist"),
         (set_(("joints", "B", "hole"), "coupler.C"), "a point a body does not have"),
@@ -222,6 +229,8 @@ def _errors():
         (set_(("outputs", "transmission"), [["coupler", "B", "C"], ["rocker", "B", "O4"]]), "an output on"),
         (set_(("bodies", "rocker", "mass"), -1.0), "a value out of its range"),
         (rename, "a key jaxcrank does not know"),
+        (lubricated_without_length, "a key a law needs"),
+        (zero_crank, "a crank of zero length"),
     ]
 
 

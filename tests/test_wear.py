@@ -182,6 +182,16 @@ def test_life_needs_a_worn_joint():
         life(jc.paper(), 1e6)
 
 
+def test_only_a_dry_pin_in_hole_joint_wears():
+    """Wear on another law (a lubricated joint, an ideal one) is refused in one line that names the law."""
+    from jaxcrank.physics.lubrication import Lubricated
+
+    for law, name in ((Lubricated(0.01, 0.0097, 0.05, 0.02), "'lubricated'"), (jc.Ideal(), "'ideal'")):
+        with pytest.raises(ParameterError, match=f"its law {name} is not a dry revolute clearance joint") as err:
+            from_clearance(law)
+        assert "\n" not in str(err.value)
+
+
 def test_from_clearance_keeps_the_joint_and_the_preset_is_registered():
     law = jc.paper().joints["B"]
     worn = from_clearance(law, modes=8)

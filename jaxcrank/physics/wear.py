@@ -237,7 +237,11 @@ def from_clearance(law, wear: Archard | None = None, modes: int = DEFAULT_MODES)
     """
     fields = ("hole_radius", "pin_radius", "contact", "friction", "memory", "pin_material", "hole_material")
     if not all(hasattr(law, f) for f in fields) or getattr(law, "name", None) not in ("clearance", "worn"):
-        raise ParameterError(f"{law!r} is not a dry revolute clearance joint (law 'clearance' or 'worn')")
+        what = getattr(law, "name", None) or type(law).__name__
+        raise ParameterError(
+            f"its law {what!r} is not a dry revolute clearance joint (law 'clearance' or 'worn'): wear is "
+            "modelled in dry pin-in-hole joints only"
+        )
     if wear is None:
         wear = getattr(law, "wear", Archard())
     return Worn(

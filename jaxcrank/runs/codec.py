@@ -183,6 +183,17 @@ def _build(cls, table: dict, template, path: list[str]):
         for k in known:
             if k not in kwargs:
                 kwargs[k] = getattr(template, k)
+    required = [
+        k
+        for k, f in known.items()
+        if k not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
+    if required:
+        what = f"the {named_by[0]} {table[named_by[0]]!r}" if named_by and named_by[0] in table else cls.__name__
+        raise ParameterError(
+            f"[{_where(path)}] {what} needs {', '.join(required)} ({_where([*path, required[0]])} = ...); "
+            f"its keys: {', '.join(known)}"
+        )
     try:
         return cls(**kwargs)
     except ParameterError as err:
