@@ -27,15 +27,7 @@ from ..physics.compiled import compile_model
 from ..physics.drivers import DRIVERS, AbstractDriver
 from ..physics.joints import JOINT_LAWS, AbstractJointLaw
 from ..physics.laws import CONTACT_LAWS, FRICTION_LAWS, AbstractContactLaw, AbstractFrictionLaw
-from ..physics.linkage import (
-    AbstractMechanism,
-    Body,
-    BodyVector,
-    Linkage,
-    Outputs,
-    Point,
-    Pose,
-)
+from ..physics.linkage import AbstractMechanism, Body, BodyVector, Linkage, Outputs, Point, Pose
 from ..physics.linkage import Site as _Site
 from ..physics.memory import MEMORY_LAWS, AbstractMemoryLaw
 from ..physics.params import ParameterError
@@ -183,22 +175,15 @@ def _build(cls, table: dict, template, path: list[str]):
         for k in known:
             if k not in kwargs:
                 kwargs[k] = getattr(template, k)
-    required = [
-        k
-        for k, f in known.items()
-        if k not in kwargs and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-    ]
+    unset = [k for k, f in known.items() if k not in kwargs and f.default is dataclasses.MISSING]
+    required = [k for k in unset if known[k].default_factory is dataclasses.MISSING]
     if required:
         what = f"the {named_by[0]} {table[named_by[0]]!r}" if named_by and named_by[0] in table else cls.__name__
-        raise ParameterError(
-            f"[{_where(path)}] {what} needs {', '.join(required)} ({_where([*path, required[0]])} = ...); "
-            f"its keys: {', '.join(known)}"
-        )
+        needs = f"needs {', '.join(required)} ({_where([*path, required[0]])} = ...); its keys: {', '.join(known)}"
+        raise ParameterError(f"[{_where(path)}] {what} {needs}")
     try:
         return cls(**kwargs)
-    except ParameterError as err:
-        raise ParameterError(f"[{_where(path)}] {err}") from None
-    except TypeError as err:
+    except (ParameterError, TypeError) as err:
         raise ParameterError(f"[{_where(path)}] {err}") from None
 
 
@@ -264,15 +249,13 @@ def _outputs(table, path) -> Outputs:
 
     if not isinstance(table, dict):
         raise ParameterError(f"[{_where(path)}] must be a table, got {table!r}")
-    unknown = sorted(set(table) - {"deviations", "acceleration", "transmission"})
+    keys = ("deviations", "acceleration", "transmission")
+    unknown = sorted(set(table) - set(keys))
     if unknown:
-        raise ParameterError(
-            f"unknown key {unknown[0]!r} in [{_where(path)}]; keys: deviations, acceleration, transmission"
-        )
+        raise ParameterError(f"unknown key {unknown[0]!r} in [{_where(path)}]; keys: {', '.join(keys)}")
     dev = tuple(tuple(d) for d in table.get("deviations", ()))
     acc = tuple(table["acceleration"]) if table.get("acceleration") else None
-    trans = table.get("transmission")
-    trans = None if not trans else tuple(vec(v, [*path, "transmission"]) for v in trans)
+    trans = tuple(vec(v, [*path, "transmission"]) for v in table["transmission"]) if table.get("transmission") else None
     return Outputs(dev, acc, trans)
 
 
@@ -287,11 +270,10 @@ def merge(base: dict, changes: dict) -> dict:
     for k, v in changes.items():
         old = out.get(k)
         if isinstance(v, dict) and isinstance(old, dict):
-            out[k] = merge(old, v)
+            v = merge(old, v)
         elif isinstance(v, dict) and v and set(v) <= {"x", "y"} and isinstance(old, (list, tuple)) and len(old) == 2:
-            out[k] = [v.get("x", old[0]), v.get("y", old[1])]
-        else:
-            out[k] = v
+            v = [v.get("x", old[0]), v.get("y", old[1])]
+        out[k] = v
     return out
 
 
