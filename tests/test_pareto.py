@@ -126,8 +126,9 @@ class _Killed(Exception):
 
 
 def _stand_in(monkeypatch, calls, kill_at=None):
-    """A solve whose exact front is f1 = x0, q2 = 1 - x0 (x0 in [0, 1]): the first anchor at 0,
-    the second at 1, the point of bound b at 1 - b; a measure that reads it."""
+    """A solve whose exact front is f1 = s, q2 = 1 - s (s in [0, 1], the coupler length's place
+    in its bounds [0.33, 0.40] m): the first anchor at 0, the second at 1, the point of bound b
+    at 1 - b; a measure that reads it."""
 
     class Evaluator:
         def __init__(self, problem):
@@ -141,9 +142,10 @@ def _stand_in(monkeypatch, calls, kill_at=None):
             x0 = 1.0
         else:
             x0 = 0.0 if math.isinf(problem.limits[-1][2]) else 1.0 - problem.limits[-1][2]
-        return {"final_design": [x0, 0.3], "history": [], "rounds": [{}]}
+        return {"final_design": [0.33 + 0.07 * x0, 0.3], "history": [], "rounds": [{}]}
 
     def measure(ev, problem, front, x):
+        x = [(x[0] - 0.33) / 0.07]
         return {
             "objective": x[0],
             "terms": [x[0]],
@@ -177,7 +179,7 @@ def test_a_killed_front_resumes_without_solving_its_finished_points_again(proble
     calls.clear()
     res = pareto.run_front(problem, tables, tmp_path, progress=False, resume=True)
     assert [c[1][2] for c in calls] == [0.5, 0.75] and all(c[3] for c in calls)
-    assert calls[0][2] == pytest.approx((0.75, 0.3))  # from the previous point's design
+    assert calls[0][2] == pytest.approx((0.33 + 0.07 * 0.75, 0.3))  # from the previous point's design
     assert [p["objective"] for p in res["points"]] == pytest.approx([0.0, 1.0, 0.75, 0.5, 0.25])
     assert all(p["nondominated"] for p in res["points"])
     assert res["reference"] == pytest.approx([1.1, 1.1])

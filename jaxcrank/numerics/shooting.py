@@ -24,7 +24,7 @@ from ..physics import model, signals
 from ..physics.linkage import AbstractMechanism as Mechanism
 from ..physics.params import ParameterError
 from .results import RESULTS
-from .solve import Simulation, SolveOptions, simulate
+from .solve import Simulation, SolveOptions, lax_solver, simulate
 
 #: the solve settings of :func:`steady_state`: tight tolerances keep the noise of the
 #: adaptive steps in the one-revolution map (about 100 x rtol in scaled units) far below
@@ -200,16 +200,6 @@ def period_solve(
         throw=False,
         adjoint=adjoint,
     )
-
-
-def lax_solver(options):
-    """The solver of ``options`` with its Runge-Kutta stages in a plain ``lax`` loop:
-    ``ForwardMode`` sets that on the solver it sees, but the metrics-tracking wrapper
-    hides the solver from it, and the checkpointed default loop has no forward mode."""
-    solver = options.solver
-    if hasattr(solver, "scan_kind"):
-        solver = eqx.tree_at(lambda s: s.scan_kind, solver, "lax", is_leaf=lambda x: x is None)
-    return solver
 
 
 @eqx.filter_jit

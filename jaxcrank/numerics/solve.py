@@ -261,13 +261,35 @@ def as_values(mech: Mechanism) -> Mechanism:
     return jax.tree_util.tree_map(value, mech)
 
 
+def lax_solver(options):
+    """The solver of ``options`` with its Runge-Kutta stages in a plain ``lax`` loop:
+    ``ForwardMode`` sets that on the solver it sees, but the metrics-tracking wrapper
+    hides the solver from it, and the checkpointed default loop has no forward mode."""
+    solver = options.solver
+    if hasattr(solver, "scan_kind"):
+        solver = eqx.tree_at(lambda s: s.scan_kind, solver, "lax", is_leaf=lambda x: x is None)
+    return solver
+
+
 def sample_times(mech: Mechanism, t1=None, n_samples=None, t0=0.0):
     """Equally spaced sample times (equal steps of the driver's nominal angle), s.
-    Defaults: four revolutions (0.4 s at 600 rpm), one sample every 0.1 degree."""
+    Defaults: four revolutions (0.4 s at 600 rpm), one sample every 0.1 degree. With ``t1`` and
+    ``n_samples`` given, the driver's period is not read (it may be traced: ``jax.grad`` with
+    respect to the driver's speed); a default needs it concrete.
+
+    Raises:
+        ParameterError: a default needed while the driver's period is traced."""
+    if t1 is not None and n_samples is not None:
+        return jnp.linspace(t0, t1, n_samples)
+    if isinstance(mech.period, jax.core.Tracer):
+        raise ParameterError(
+            "the driver's speed is traced (jit, grad or vmap with respect to it): give simulate t1 and "
+            "n_samples (or ts), which its default sample times would read from the speed"
+        )
     period = float(mech.period)
-    t1 = 4.0 * period if t1 is None else float(t1)
+    t1 = 4.0 * period if t1 is None else t1
     if n_samples is None:
-        n_samples = int(round((t1 - t0) / period * 3600)) + 1
+        n_samples = int(round((float(t1) - t0) / period * 3600)) + 1
     return jnp.linspace(t0, t1, n_samples)
 
 
@@ -352,6 +374,8 @@ def simulate(
     solver, rtol, atol, dt0, max_steps = options.solver, options.rtol, options.atol, options.dt0, options.max_steps
     controller = step_size_controller(solver, rtol, atol)
     adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    if metrics_start is not None and isinstance(adjoint, diffrax.ForwardMode):
+        solver = lax_solver(options)  # the tracking wrapper hides the solver from ForwardMode
     # a bar on a terminal only: elsewhere (a log, a pipe) its carriage-return redraws would fill it with lines
     bar = progress and bool(getattr(sys.stderr, "isatty", lambda: False)())
     meter = diffrax.TqdmProgressMeter(refresh_steps=5000) if bar else diffrax.NoProgressMeter()

@@ -121,26 +121,61 @@ def get_parameter(mech: AbstractMechanism, name: str) -> float:
     return float(parameter_value(mech, name))
 
 
-def set_parameter(mech: AbstractMechanism, name: str, x) -> AbstractMechanism:
-    """``mech`` with parameter ``name`` set to ``x`` (SI; traceable).
-
-    Raises:
-        ParameterError: for an unknown name or one that is not a number.
-    """
+def _set(mech: AbstractMechanism, name: str, x) -> tuple[AbstractMechanism, list[tuple[str, ...]]]:
+    """``mech`` with ``name`` set to ``x`` (not checked), and the paths that were set."""
     joint = _clearance_joint(mech, name)
     if joint is not None:
-        return with_joint_clearance(mech, joint, x)
-    for path in _paths(mech, name):
+        return with_joint_clearance(mech, joint, x), []  # the law checks its clearance itself
+    paths = _paths(mech, name)
+    for path in paths:
         mech = eqx.tree_at(_getter(path), mech, x)
+    return mech, paths
+
+
+def _checked(mech: AbstractMechanism, changed) -> AbstractMechanism:
+    """``mech`` once every Module along the ``(name, paths)`` in ``changed`` passed its own
+    checks again (``eqx.tree_at`` skips them; values that are JAX tracers are not checked:
+    [`jaxcrank.physics.params`][])."""
+    for name, paths in changed:
+        for path in paths:
+            node, modules = mech, [mech]
+            for part in path[:-1]:
+                node = _step(node, part)
+                modules += [node] if isinstance(node, eqx.Module) else []
+            try:
+                for module in reversed(modules):
+                    for cls in type(module).__mro__:
+                        if "__check_init__" in vars(cls):
+                            vars(cls)["__check_init__"](module)
+            except ParameterError as err:
+                raise ParameterError(str(err) if str(err).startswith(name) else f"{name}: {err}") from None
     return mech
+
+
+def set_parameter(mech: AbstractMechanism, name: str, x) -> AbstractMechanism:
+    """``mech`` with parameter ``name`` set to ``x`` (SI; traceable), checked as a mechanism
+    built with that value is (a concrete value; a JAX tracer is not checked).
+
+    Raises:
+        ParameterError: for an unknown name, one that is not a number, or a concrete value out
+            of its range (the message names the parameter and the range).
+    """
+    mech, paths = _set(mech, name, x)
+    return _checked(mech, [(name, paths)])
 
 
 def set_parameters(mech: AbstractMechanism, names: Sequence[str], values) -> AbstractMechanism:
     """``mech`` with each parameter in ``names`` set to the matching entry of ``values``
-    (SI; traceable), as [`set_parameter`][jaxcrank.physics.parameters.set_parameter]."""
+    (SI; traceable), as [`set_parameter`][jaxcrank.physics.parameters.set_parameter]; checked
+    once all are set (so that, e.g., a hole and its pin can grow together).
+
+    Raises:
+        ParameterError: as ``set_parameter``."""
+    changed = []
     for i, name in enumerate(names):
-        mech = set_parameter(mech, name, values[i])
-    return mech
+        mech, paths = _set(mech, name, values[i])
+        changed.append((name, paths))
+    return _checked(mech, changed)
 
 
 _UNITS = {
