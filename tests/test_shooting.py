@@ -71,7 +71,8 @@ def test_idle_rows_newton_matrix_and_multipliers():
 
 def test_batch_means_against_a_direct_computation():
     """Mean and RMS with Student-t 95 % intervals from batch means, the first values
-    dropped to fill whole batches, against the formula written out here."""
+    dropped to fill whole batches, against the formula written out here; a peak's ``max`` is
+    the largest value of the run, the dropped ones included."""
     values = np.random.default_rng(1).normal(2.0, 0.3, 21)
     batch = 4
     kept = values[1:].reshape(5, 4)
@@ -86,6 +87,7 @@ def test_batch_means_against_a_direct_computation():
             else (centre, centre - half, centre + half)
         )
         np.testing.assert_allclose([got["value"], got["ci95_low"], got["ci95_high"]], want, rtol=1e-14)
+        assert ("max" in got) == (not rms) and got.get("max", values.max()) == values.max()  # all 21 values
     with pytest.raises(jc.ParameterError, match="at least 2 batches"):
         shooting.batch_means(values[:7], 4, False)
 

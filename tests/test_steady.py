@@ -699,3 +699,27 @@ def test_a_shooting_that_fails_gives_the_long_run_statistics_when_asked(paper):
     assert all(np.isfinite(float(v)) for v in out.metrics.values())
     for s in out.statistics.values():
         assert s["ci95_low"] <= s["value"] <= s["ci95_high"]
+
+
+def test_the_steady_summary_of_a_motion_that_is_not_periodic_gives_the_largest_peak():
+    """``jaxcrank steady``'s summary.json: where the motion is not periodic, a peak metric is the
+    largest over the statistics revolutions (the mean per-revolution peak understates the load a
+    bearing sees), an RMS metric its long-run value; both keep their statistics."""
+    from types import SimpleNamespace
+
+    from jaxcrank.runs.steady_cli import summary
+
+    statistics = {
+        "peak_contact_force_B_N": shooting.batch_means(np.array([1.0, 3.0, 2.0, 2.0]), 2, rms=False),
+        "rms_transmission_angle_error_deg": shooting.batch_means(np.full(4, 0.5), 2, rms=True),
+    }
+    steady = SimpleNamespace(
+        mechanism=jc.paper(), regime="not periodic", revolutions={"settle": 20, "statistics": 4},
+        period_revolutions=0, floquet_multipliers=np.zeros(0, complex), neutral=(), residual=1.0,
+        newton_iterations=0, lyapunov_exponent_per_s=3.0, statistics=statistics,
+        metrics={k: s["value"] for k, s in statistics.items()},
+    )  # fmt: skip
+    args = SimpleNamespace(max_period=2, statistics_revolutions=4, solver="tsit5", rtol=1e-8, atol=1e-8, max_steps=1)
+    out = summary(steady, 1.0, args)
+    assert out["metrics"] == {"peak_contact_force_B_N": 3.0, "rms_transmission_angle_error_deg": 0.5}
+    assert out["statistics"]["peak_contact_force_B_N"]["value"] == 2.0 and "largest" in out["metrics_window"]

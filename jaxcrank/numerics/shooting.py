@@ -299,9 +299,9 @@ def batch_means(values: np.ndarray, batch: int, rms: bool) -> dict:
 
     ``rms``: the values are per-revolution RMS values, combined as mean squares (the
     long-run RMS is ``sqrt(mean of squares)``; the interval is the square root of the
-    mean square's). Otherwise the mean of the values (e.g. per-revolution peaks).
-    Returns ``{"value", "ci95_low", "ci95_high"}`` in the metric's unit. Needs at least
-    two batches."""
+    mean square's). Otherwise the mean of the values (e.g. per-revolution peaks), and ``max``,
+    the largest of them all (the peak over the run). Returns ``{"value", "ci95_low",
+    "ci95_high"}`` (and ``max``) in the metric's unit. Needs at least two batches."""
     from scipy import stats
 
     values = np.asarray(values, dtype=float)
@@ -318,7 +318,7 @@ def batch_means(values: np.ndarray, batch: int, rms: bool) -> dict:
             "ci95_low": math.sqrt(max(mean - half, 0.0)),
             "ci95_high": math.sqrt(mean + half),
         }
-    return {"value": mean, "ci95_low": mean - half, "ci95_high": mean + half}
+    return {"value": mean, "ci95_low": mean - half, "ci95_high": mean + half, "max": float(values.max())}
 
 
 def not_periodic(mech, z, options, statistics_revolutions, batch_revolutions, samples, counts):

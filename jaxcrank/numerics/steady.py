@@ -96,7 +96,8 @@ class SteadyState(eqx.Module):
             ``ln max|mu| / (k T)`` from the multipliers; not periodic, the finite-time
             estimate from tangent growth.
         statistics: not periodic: metric -> ``{"value", "ci95_low", "ci95_high"}`` over
-            the statistics revolutions (units in the names); ``None`` when periodic.
+            the statistics revolutions (units in the names; a peak's value is the mean of the
+            per-revolution peaks, and its ``max`` the largest of them); ``None`` when periodic.
         revolutions: solve counts in revolutions: ``settle``, ``shooting`` (with
             tangents), ``orbit``, ``statistics`` (with a tangent).
         options: the solve settings used.

@@ -203,9 +203,11 @@ def summary(steady, wall: float, args) -> dict:
         "metrics_window": (
             f"one period of the orbit ({steady.period_revolutions} revolution(s))"
             if steady.regime == "periodic"
-            else f"long-run statistics over {args.statistics_revolutions} revolutions (batch means, 95 % CI)"
+            else f"long-run statistics over {args.statistics_revolutions} revolutions: an RMS metric's long-run "
+            "RMS, a peak the largest over those revolutions (statistics: the per-revolution mean with its "
+            "batch-means 95 % CI, and that largest as max)"
         ),
-        "metrics": {k: float(v) for k, v in steady.metrics.items()},
+        "metrics": {k: float((steady.statistics or {}).get(k, {}).get("max", v)) for k, v in steady.metrics.items()},
         "statistics": steady.statistics,
         "revolutions_solved": dict(steady.revolutions),
         "solver": {"name": args.solver, "rtol": args.rtol, "atol": args.atol, "max_steps": args.max_steps},
