@@ -3,6 +3,7 @@ sweep resumes to the same table, several devices and processes give the same
 numbers as one, and a sweep runs on the four-bar as on the slider-crank. Short simulations
 (3 ms); the slider-crank tests share one compiled batch."""
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -130,6 +131,10 @@ def test_killed_sweep_resumes_to_the_same_table(tmp_path, table, monkeypatch):
         sweep.run(
             jc.paper(), NAMES, DESIGNS[:4], SHORT, out=tmp_path, chunk=2, resume=True, progress=False, engine="xla"
         )
+    no_gravity, longer = jc.set_parameter(jc.paper(), "gravity", 0.0), dataclasses.replace(SHORT, revolutions=0.5)
+    for base, settings, what in ((no_gravity, SHORT, "mechanism"), (jc.paper(), longer, "settings")):
+        with pytest.raises(ParameterError, match=f"another {what}"):  # their rows would mix with these: refused
+            sweep.run(base, NAMES, DESIGNS, settings, out=tmp_path, chunk=2, resume=True, progress=False, engine="xla")
     monkeypatch.setattr(sweep, "_evaluate", real)
     resumed = sweep.run(
         jc.paper(), NAMES, DESIGNS, SHORT, out=tmp_path, chunk=2, resume=True, progress=False, engine="xla"

@@ -131,7 +131,8 @@ def run_sweep(args) -> int:
     out = args.out
     if jax.process_index() == 0:
         out.mkdir(parents=True, exist_ok=True)
-        (out / "spec.toml").write_text(args.spec.read_text())
+        if not (args.resume and (out / "spec.toml").exists()):  # a resumed run keeps its record
+            (out / "spec.toml").write_text(args.spec.read_text())
     start = time.perf_counter()
     distributed = bool(args.distributed or args.coordinator)
     engine = engines.resolve(args.engine, spec.settings, args.workers, distributed, out, args.resume, spec.base)

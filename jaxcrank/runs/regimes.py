@@ -84,7 +84,16 @@ from ..physics.parameters import set_parameters
 from ..physics.params import ParameterError
 from . import programs
 from .sweep_design import STATUSES, split_valid
-from .sweep_table import append, atomic_write, csv_text, open_table, parameter_columns, read_table, table_from_rows
+from .sweep_table import (
+    append,
+    atomic_write,
+    csv_text,
+    open_table,
+    parameter_columns,
+    read_table,
+    run_identity,
+    table_from_rows,
+)
 
 #: the regimes (``""``: the design failed or is invalid)
 REGIMES = (Regime.PERIODIC, Regime.NOT_PERIODIC)
@@ -262,7 +271,10 @@ def classify(
     if designs.ndim != 2 or designs.shape[1] != len(names):
         raise ParameterError(f"designs must have one column per parameter {names}, got shape {designs.shape}")
     cols = columns(base, names)
-    path, done = open_table(out, resume, designs, cols, names, TEXT_COLUMNS)
+    settings = dict(settle_revolutions=settle_revolutions, max_period=max_period, recurrence_tol=recurrence_tol)
+    settings.update(solver=options.solver_name, rtol=options.rtol, atol=options.atol, max_steps=options.max_steps)
+    identity = run_identity(base, settings)
+    path, done = open_table(out, resume, designs, cols, names, TEXT_COLUMNS, identity=identity)
     if out is not None:
         from .engines import ENGINE_FILE
 

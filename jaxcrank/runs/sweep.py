@@ -99,6 +99,7 @@ from .sweep_table import (
     open_table,
     parameter_columns,
     read_table,
+    run_identity,
     table_from_rows,
 )
 from .sweep_workers import run_in_workers
@@ -187,7 +188,8 @@ def run(
     cols = columns(base, names)
     n_metrics = len(metric_names(base))
     writer = jax.process_index() == 0
-    path, done = open_table(out, resume, designs, cols, names, writer=writer)
+    identity = run_identity(base, settings.to_text())
+    path, done = open_table(out, resume, designs, cols, names, writer=writer, identity=identity)
     if path is not None and writer:
         atomic_write(Path(out) / engines.ENGINE_FILE, lambda f: f.write(engine.encode()))
     rows: list[list] = []

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -166,20 +167,34 @@ def resumable_rows(path: Path, cols, names, designs, text: Sequence[str] = TEXT_
     return {int(i) for i in table.get("index", [])}
 
 
+#: what a run was made of (its base mechanism and settings, as text), beside its table
+IDENTITY_FILE = "run.json"
+
+
 def open_table(
-    out, resume: bool, designs: np.ndarray, cols, names, text: Sequence[str] = TEXT_COLUMNS, writer: bool = True
+    out,
+    resume: bool,
+    designs: np.ndarray,
+    cols,
+    names,
+    text: Sequence[str] = TEXT_COLUMNS,
+    writer: bool = True,
+    identity: dict | None = None,
 ) -> tuple[Path | None, set[int]]:
     """Open the table of a run over ``designs`` in the directory ``out``: ``table.csv``'s
     path (None without ``out``) and the indices of the designs already in it.
 
-    A new run writes ``designs.npy`` and the table's header; ``resume`` continues an
-    existing one after checking that it is over the same designs (exactly) and that its
-    table is this run's ([`resumable_rows`][jaxcrank.runs.sweep_table.resumable_rows]).
-    Only a ``writer`` (process 0 of a distributed job) writes.
+    A new run writes ``designs.npy``, ``identity`` (what else its rows depend on: the base
+    mechanism and the settings, as text) to `IDENTITY_FILE` and the table's header;
+    ``resume`` continues an existing one after checking that it is over the same designs
+    (exactly), of the same identity and that its table is this run's
+    ([`resumable_rows`][jaxcrank.runs.sweep_table.resumable_rows]). Only a ``writer``
+    (process 0 of a distributed job) writes.
 
     Raises:
-        ParameterError: ``out`` holds a table but ``resume`` is not set, or a run over other designs.
-        CorruptFileError: ``designs.npy`` or the table cannot be read.
+        ParameterError: ``out`` holds a table but ``resume`` is not set, or a run over other
+            designs, or of another base mechanism or settings (naming which).
+        CorruptFileError: ``designs.npy``, `IDENTITY_FILE` or the table cannot be read.
     """
     from ..physics.params import ParameterError
 
@@ -203,11 +218,45 @@ def open_table(
             ) from None
         if old.shape != designs.shape or not np.array_equal(old, designs):
             raise ParameterError(f"{out} holds a run over other designs: resume needs the same spec")
+    if resume and identity is not None and (out / IDENTITY_FILE).exists():
+        _check_identity(out / IDENTITY_FILE, identity)
     if resume and path.exists():
         done = resumable_rows(path, cols, names, designs, text)
     if writer:
         out.mkdir(parents=True, exist_ok=True)
         atomic_write(out / "designs.npy", lambda f: np.save(f, designs))
+        if identity is not None:
+            atomic_write(out / IDENTITY_FILE, lambda f: f.write(json.dumps(identity, indent=1).encode()))
         if not path.exists():
             atomic_write(path, lambda f: f.write(csv_text([cols]).encode()))
     return path, done
+
+
+def run_identity(base, settings: dict) -> dict | None:
+    """What a run's rows depend on besides its designs: the base mechanism (as its file holds it)
+    and ``settings`` (plain values), for [`open_table`][jaxcrank.runs.sweep_table.open_table];
+    None for a mechanism that cannot be written out (its resume is then not checked for it)."""
+    from ..physics.params import ParameterError
+    from .codec import to_dict
+
+    try:
+        identity = {"mechanism": to_dict(base), "settings": settings}
+        return json.loads(json.dumps(identity))
+    except (ParameterError, TypeError, ValueError):
+        return None
+
+
+def _check_identity(path: Path, identity: dict) -> None:
+    """Raise a ParameterError naming what differs between the run recorded in ``path`` and ``identity``."""
+    from ..physics.params import ParameterError
+
+    try:
+        recorded = json.loads(path.read_text())
+    except (ValueError, OSError) as err:
+        raise CorruptFileError(f"{path}: cannot be read ({err}); move the directory away to start over") from None
+    differ = [key for key in identity if recorded.get(key) != identity[key]]
+    if differ:
+        raise ParameterError(
+            f"{path.parent} holds a run of another {' and '.join(differ)} ({path.name} records them): resuming "
+            "would mix its rows with this run's; give the run's own mechanism and settings, or choose another --out"
+        )
