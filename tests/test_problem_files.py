@@ -206,6 +206,28 @@ def test_a_problem_files_history_names_the_merit_without_a_unit():
     assert _search_merit_named(None) is None
 
 
+def test_a_windowed_problem_file_with_length_variables_is_recorded_for_its_run():
+    """A problem file with the windowed objective runs as a preset problem does, whose run folder
+    records the problem (optimize.toml): its length variables are written as tables, not refused."""
+    import tomli_w
+
+    from optim.cli import _drop_none, resolved
+    from optim.optimize import Settings
+
+    p = _problem(
+        objective={"terms": [{"quantity": "rms_rocker_angle_deviation_deg"}]},
+        constraints=[],
+        solver={"method": "ensemble", "t_start": 0.2, "t_end": 0.25},
+    )
+    record = resolved(p, Settings(), "windowed")
+    lengths = record["design"]["lengths"]
+    assert [(v["name"], v["body"], v["carry"]) for v in lengths][:2] == [
+        ("coupler_length", "coupler", "uniform_bar"),
+        ("rocker_length", "rocker", "scale"),
+    ]
+    assert "lengths" in tomli_w.dumps(_drop_none(record))  # as the run writes it
+
+
 def test_the_augmented_lagrangian_gradient_is_its_derivative():
     """On outputs that are linear in the design (values o0 + J x), the evaluator's augmented
     Lagrangian gradient from (outputs, J) equals central differences of its value, active and
