@@ -286,19 +286,16 @@ def resolved(problem: Problem, settings: Settings, name: str) -> dict:
 
 
 def _subclass_fields(problem: Problem) -> dict:
-    """The fields a problem class adds to [`AbstractProblem`][optim.problem.AbstractProblem], as TOML
-    values (the derived group as its table, each length variable as one; empty limits and
-    lengths left out)."""
+    """The fields a problem class adds to [`AbstractProblem`][optim.problem.AbstractProblem], as TOML values (the
+    derived group as its table, each length variable as one; empty limits and lengths left out)."""
     extra = [f.name for f in dataclasses.fields(problem) if f.name not in {g.name for g in dataclasses.fields(Problem)}]
     out = {}
     for k in extra:
         v = getattr(problem, k)
-        if k == "lengths" and v:  # a problem file's: recorded (its --resume reads the file again)
-            out[k] = [dataclasses.asdict(length) for length in v]
-            continue
-        if k in ("limits", "lengths"):
-            if v:
-                raise ParameterError(f"a problem with {k} is a problem file: run it with --problem FILE.toml")
+        if k == "limits" and v:
+            raise ParameterError("a problem with limits is a problem file: run it with --problem FILE.toml")
+        if k in ("limits", "lengths"):  # a problem file's lengths: recorded (its --resume reads the file again)
+            out.update({k: [dataclasses.asdict(length) for length in v]} if v else {})
             continue
         out[k] = derived_table(v) if k == "derived" and v is not None else v
         if k in ("terms", "scatter"):
