@@ -282,10 +282,7 @@ def sample_times(mech: Mechanism, t1=None, n_samples=None, t0=0.0):
     if t1 is not None and n_samples is not None:
         return jnp.linspace(t0, t1, n_samples)
     if isinstance(mech.period, jax.core.Tracer):
-        raise ParameterError(
-            "the driver's speed is traced (jit, grad or vmap with respect to it): give simulate t1 and "
-            "n_samples (or ts), which its default sample times would read from the speed"
-        )
+        raise ParameterError("the driver's speed is traced: give simulate t1 and n_samples (or ts), not its defaults")
     period = float(mech.period)
     t1 = 4.0 * period if t1 is None else t1
     if n_samples is None:
