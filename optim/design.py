@@ -139,7 +139,10 @@ class DesignProblem(AbstractProblem):
         if self.samples and not self.scatter:
             raise ParameterError("samples > 0 needs a scatter: [(name, tolerance, distribution), ...]")
         if self.samples and isinstance(self.objective, Steady):
-            raise ParameterError("the steady-state objective does not take manufactured parts (samples = 0)")
+            raise ParameterError(
+                f"[scatter] samples = {self.samples}: the steady-state objective does not average over manufactured "
+                "parts; set samples = 0, or choose a windowed objective ([solver] method = 'ensemble')"
+            )
         if self.statistic not in STATISTICS:
             raise ParameterError(f"statistic = {self.statistic!r} is unknown; valid: {', '.join(STATISTICS)}")
         for entry in self.scatter:

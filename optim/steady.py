@@ -210,7 +210,10 @@ class SteadyEvaluator:
         if not isinstance(problem.objective, Steady):
             raise ParameterError(f"SteadyEvaluator needs a Steady objective, not {type(problem.objective).__name__}")
         if getattr(problem, "samples", 0):
-            raise ParameterError("the steady-state objective does not average over manufactured parts (samples = 0)")
+            raise ParameterError(
+                f"samples = {problem.samples}: the steady-state objective does not average over manufactured parts "
+                "(samples = 0)"
+            )
         self.problem = problem.with_objective(dataclasses.replace(problem.objective, throw=False))
         self.objective = self.problem.objective
         self.last = None  # the last periodic steady state: the next warm start

@@ -182,6 +182,10 @@ def test_the_problem_file_reads_bounds_linear_constraints_and_defaults():
             {"variables": {"clearance_B": {"lower": 1e-4, "upper": 4e-4, "start": 5e-4}}},
             "start of 'clearance_B': 0.0005 is outside its bounds \\[lower, upper\\] = \\[0.0001, 0.0004\\]",
         ),
+        (
+            {"scatter": {"parts": [["clearance_B", 1e-5, "normal"]], "samples": 2}},
+            "samples = 2: the steady-state objective does not average over manufactured parts; set samples = 0",
+        ),
         ({"objectives": {}}, "unknown keys \\['objectives'\\]"),
         ({"solver": {"method": "ensemble"}}, "windowed objective measures the RMS metrics only"),
     ],
