@@ -151,6 +151,7 @@ def run_front(args, path: Path, problem, tables: dict) -> int:
     print(
         f"{problem.description}: {len(front)} of {len(state['points'])} points on the front, "
         f"hypervolume {state['hypervolume']:.6g}; {out / 'pareto.csv'}, {out / 'pareto.png'}"
+        + (f" ({state['note']})" if state.get("note") else "")
     )
     return 0
 

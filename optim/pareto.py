@@ -312,6 +312,8 @@ def run_front(problem: DesignProblem, tables: dict, out, progress: bool = True, 
             state["scale"] = front.scale or (spread if spread > 0 else max(abs(q_first), 1.0))
             f_first, f_second = front.weight * q_first, front.weight * q_second
             state["levels"] = [e / front.weight for e in levels(f_second, f_first, front.points)] if spread else []
+            if not spread:  # the objectives do not conflict over the box
+                state["note"] = f"the anchors have the same {front.quantity} ({q_first:.6g}): the front is one design"
             _save(path, state)
         if k >= 2 + len(state["levels"] or []):
             break

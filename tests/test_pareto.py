@@ -238,3 +238,24 @@ def test_the_page_prints_the_benchmark_problem_and_its_numbers():
         assert f"{res['hypervolume'][method]:.4g}" in page, method
         assert f"{res['cpu_seconds'][method]:.0f}" in page, method
     spec.from_dict(tomllib.loads(block))  # the printed file is a valid problem file
+
+
+def test_anchors_that_coincide_give_a_one_design_front_and_say_so(problem, tmp_path, monkeypatch):
+    """Where both anchors have the same bounded quantity, no level lies between them: the run
+    stops after the anchors, one of the two equal points is on the front, and pareto.json's
+    ``note`` says why fewer points than asked were solved."""
+    calls = []
+    _stand_in(monkeypatch, calls)
+
+    def same(ev, problem, front, x):
+        return {
+            "objective": 0.5, "terms": [0.5], "quantity": 0.5, "second": 0.5,
+            "constraints": [], "satisfied": [], "feasible": True,
+        }  # fmt: skip
+
+    monkeypatch.setattr(pareto, "measure", same)
+    tables = {"optimizer": {"max_iterations": 2, "rounds": 1}, "pareto": {"quantity": FORCE, "points": 3}}
+    res = pareto.run_front(problem, tables, tmp_path, progress=False)
+    assert len(calls) == 2 and res["levels"] == [] and "the front is one design" in res["note"]
+    assert [p["nondominated"] for p in res["points"]] == [True, False]
+    assert json.loads((tmp_path / "pareto.json").read_text())["note"] == res["note"]
