@@ -303,6 +303,8 @@ def test_cli_writes_summary_orbit_and_section_plot(periodic, tmp_path):
     assert summary["metrics"][KEY] > 0.0 and "peak_contact_force_B_N" in summary["metrics"]
     for name in ("orbit.csv", "poincare_section.png", "config.toml", "figures/slider_x.png"):
         assert (out / name).exists(), name
+    header = (out / "orbit.csv").read_text().splitlines()[0].split(",")
+    assert list(summary["units"]) == header and summary["units"]["t"] == "s"  # every column's unit
     assert cli.main(["steady", "--out", str(out), "--settle-revolutions", "0"]) == 2
 
 

@@ -246,6 +246,8 @@ def run(args) -> int:
     steady = steady_state(mech, options, progress=not args.quiet)
     wall = time.perf_counter() - start
     data = summary(steady, wall, args)
+    if steady.orbit is not None:
+        data["units"] = outputs.columns(mech)  # of orbit.csv's columns, as simulate's summary.json gives them
     (out / "summary.json").write_text(json.dumps(data, indent=2))
     written = ["config.toml", "summary.json"]
     if steady.orbit is not None:
