@@ -248,6 +248,10 @@ def fit(
     for name, ok, why in zip(names, iv.identifiable, iv.reasons):
         if not ok and final.regime == PERIODIC:
             notes.append(f"{name} not identifiable: {why}")
+    if not converged and final.regime == PERIODIC:  # the intervals are a minimum's; this one is not known to be
+        why = f"the fit did not converge ({stop}): the interval is the last iterate's, not a minimum's"
+        iv.reasons = [why if ok else f"{why}; {reason}" for ok, reason in zip(iv.identifiable, iv.reasons)]
+        iv.identifiable = [False] * len(names)
     rows = []
     for row in res.history:
         x_row = [p.si(u) for p, u in zip(params, row["u"])]

@@ -281,6 +281,19 @@ def test_a_noise_free_trace_is_recovered_from_a_start_a_few_percent_off(cheap):
     assert summary["condition_number"] > 1.0 and summary["misfit_final"] < summary["misfit_start"]
 
 
+def test_a_fit_that_did_not_converge_claims_no_parameter_identified(cheap):
+    """Stopped by its iteration limit, a fit's intervals are the last iterate's, not a minimum's:
+    every parameter is flagged not identifiable with that reason, and the notes say so."""
+    base, trace = cheap
+    result = fit(
+        base, _params(TRUE * np.array([1.02, 0.96])), trace, options=CHEAP, settings=LMSettings(max_iterations=1)
+    )
+    assert not result.converged and result.final.regime == "periodic"
+    for p in result.summary()["parameters"].values():
+        assert p["identifiable"] is False and "did not converge" in p["why_not"]
+    assert any(note.startswith("not converged") for note in result.notes)
+
+
 def test_fit_command_recovers_a_noise_free_trace_and_writes_fit_json_csv_and_figure(cheap, tmp_path):
     """``jaxcrank fit`` from 2 % below the clearance and 4 % above the restitution recovers
     the design the noise-free trace came from, to 1e-6."""
