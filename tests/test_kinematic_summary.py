@@ -27,7 +27,7 @@ LENGTHS = ("ground_length", "crank_length", "coupler_length", "rocker_length")
 def _four_bar(d, a, b, c):
     """The preset four-bar with ground, crank, coupler and rocker lengths d, a, b, c (m),
     set past the preset's crank-rocker check."""
-    return jc.set_parameters(jc.four_bar(), LENGTHS, [d, a, b, c])
+    return jc.set_parameters(jc.four_bar(), LENGTHS, [d, a, b, c], check=False)
 
 
 def _turn(a, b):

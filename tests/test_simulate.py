@@ -155,3 +155,18 @@ def test_tracked_metrics_take_forward_mode_as_documented():
     h = 1.2e-6
     fd = (rms(1.2 + h) - rms(1.2 - h)) / (2 * h)
     assert np.isfinite(tangent) and abs(tangent - fd) <= 1e-4 * abs(fd) and value > 0
+
+
+def test_a_value_set_with_eqx_tree_at_is_checked_by_simulate():
+    """``eqx.tree_at`` skips a module's checks; simulate runs them on the concrete mechanism it is
+    given, naming the parameter by its path, before any solve (a traced value is not checked)."""
+    import equinox as eqx
+    import jax
+
+    bad = eqx.tree_at(lambda m: m.joints["B"].contact.restitution, jc.paper(), 1.2)
+    with pytest.raises(jc.ParameterError, match=r"joints\.B\.contact: restitution = 1.2 is outside"):
+        jc.simulate(bad, t1=1e-4)
+    with pytest.raises(jc.ParameterError, match="rod_mass = -1 kg"):
+        jc.simulate(eqx.tree_at(lambda m: m.rod_mass, jc.paper(), -1.0), t1=1e-4)
+    speed = jax.jit(lambda r: jc.simulate(eqx.tree_at(lambda m: m.rod_mass, jc.paper(), r), t1=1e-4).ys[-1, 0])
+    assert np.isfinite(speed(1.2))

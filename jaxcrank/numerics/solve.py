@@ -26,6 +26,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 from .. import _private
 from ..physics import model
 from ..physics.linkage import AbstractMechanism as Mechanism
+from ..physics.parameters import check_values
 from ..physics.params import ParameterError
 from . import tracking
 from .linalg import DenseInverse
@@ -355,6 +356,7 @@ def simulate(
     Works under ``jax.jit``, ``jax.grad`` and ``jax.vmap`` (with ``throw=True``
     inside a trace, failures raise through ``equinox.error_if``).
     """
+    check_values(mech)  # its numbers, as its constructors check them (eqx.tree_at skips those)
     model.compile_model(mech)  # the description's structure and assembly, checked before anything is traced
     if ts is None and not save_samples and metrics_start is not None:
         # only the span: no array of sample times is built (traceable in t1)

@@ -20,6 +20,7 @@ Every function here is traceable in the value (``jax.grad``, ``jax.vmap``).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -152,22 +153,53 @@ def _checked(mech: AbstractMechanism, changed) -> AbstractMechanism:
     return mech
 
 
-def set_parameter(mech: AbstractMechanism, name: str, x) -> AbstractMechanism:
+def check_values(mech: AbstractMechanism) -> None:
+    """Run every Module's own checks in ``mech`` again, as its constructors did (a mechanism changed
+    with ``eqx.tree_at`` skipped them); values that are JAX tracers are not checked.
+
+    Raises:
+        ParameterError: a concrete value out of its range (the message names it)."""
+    seen = set()
+
+    def walk(node, path):
+        if isinstance(node, eqx.Module) and id(node) not in seen:
+            seen.add(id(node))
+            try:  # the outer module first: its message names its own fields
+                for cls in type(node).__mro__:
+                    if "__check_init__" in vars(cls):
+                        vars(cls)["__check_init__"](node)
+            except ParameterError as err:
+                raise ParameterError(f"{'.'.join(path)}: {err}" if path else str(err)) from None
+            for field in dataclasses.fields(node):
+                walk(getattr(node, field.name, None), [*path, field.name])
+        elif isinstance(node, dict):
+            for key, value in node.items():
+                walk(value, [*path, str(key)])
+        elif isinstance(node, (list, tuple)):
+            for value in node:
+                walk(value, path)
+
+    walk(mech, [])
+
+
+def set_parameter(mech: AbstractMechanism, name: str, x, *, check: bool = True) -> AbstractMechanism:
     """``mech`` with parameter ``name`` set to ``x`` (SI; traceable), checked as a mechanism
-    built with that value is (a concrete value; a JAX tracer is not checked).
+    built with that value is (a concrete value; a JAX tracer is not checked). ``check=False``
+    sets it past those checks (a test of what a simulation does with a value out of range;
+    ``jaxcrank.simulate`` checks again).
 
     Raises:
         ParameterError: for an unknown name, one that is not a number, or a concrete value out
             of its range (the message names the parameter and the range).
     """
     mech, paths = _set(mech, name, x)
-    return _checked(mech, [(name, paths)])
+    return _checked(mech, [(name, paths)]) if check else mech
 
 
-def set_parameters(mech: AbstractMechanism, names: Sequence[str], values) -> AbstractMechanism:
+def set_parameters(mech: AbstractMechanism, names: Sequence[str], values, *, check: bool = True) -> AbstractMechanism:
     """``mech`` with each parameter in ``names`` set to the matching entry of ``values``
     (SI; traceable), as [`set_parameter`][jaxcrank.physics.parameters.set_parameter]; checked
-    once all are set (so that, e.g., a hole and its pin can grow together).
+    once all are set (so that, e.g., a hole and its pin can grow together), unless ``check=False``.
 
     Raises:
         ParameterError: as ``set_parameter``."""
@@ -175,7 +207,7 @@ def set_parameters(mech: AbstractMechanism, names: Sequence[str], values) -> Abs
     for i, name in enumerate(names):
         mech, paths = _set(mech, name, values[i])
         changed.append((name, paths))
-    return _checked(mech, changed)
+    return _checked(mech, changed) if check else mech
 
 
 _UNITS = {
