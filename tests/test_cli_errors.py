@@ -76,3 +76,31 @@ def test_design_file_without_a_final_mechanism(tmp_path, capsys):
     bad.write_text(json.dumps({"final_design_SI": [0.1]}))
     code = main(["simulate", "--design", str(bad), "--out", str(tmp_path / "run"), "--quiet"])
     _one_line_error(capsys, code, "result.json", "final_mechanism")
+
+
+@pytest.mark.parametrize("command", ["assemble", "draw"])
+@pytest.mark.parametrize("angle", ["nan", "inf", "ten"])
+def test_an_angle_that_is_not_finite_is_refused(tmp_path, capsys, command, angle):
+    """``--angle`` takes a finite number of degrees (argparse says which option, exit code 2)."""
+    with pytest.raises(SystemExit) as exit_:
+        main([command, "--angle", angle, *(["--out", str(tmp_path / "x.png")] if command == "draw" else [])])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "--angle" in err and "Traceback" not in err
+
+
+def test_an_angle_is_taken_modulo_a_turn():
+    from jaxcrank.runs.config import angle_deg
+
+    assert angle_deg("370") == pytest.approx(10.0) and angle_deg("-90") == 270.0 and 0.0 <= angle_deg("1e300") < 360.0
+
+
+def test_the_headline_of_a_linkage_without_outputs_is_its_loads():
+    """Without ``[outputs]`` a linkage has no deviations to report: the printed headline gives the
+    largest peak contact force and the peak driving moment instead of nothing; with deviations, as before."""
+    from jaxcrank.runs.simulate_cli import headline_text
+
+    loads = {"peak_contact_force_B_N": 10.0, "peak_contact_force_C_N": 30.0, "peak_contact_force_C_whole_run_N": 50.0}
+    assert headline_text({**loads, "peak_driving_moment_N_m": 2.0}) == (
+        "peak contact force at C = 30 N, peak driving moment = 2 N m"
+    )
+    assert headline_text({"max_abs_slider_x_deviation_m": 1e-4, **loads}) == "max |slider x dev| = 0.100 mm"

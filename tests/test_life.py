@@ -21,6 +21,7 @@ from jaxcrank.numerics import wear_run as nw
 from jaxcrank.physics.params import ParameterError
 from jaxcrank.physics.wear import profile_on_grid
 from jaxcrank.runs import config
+from jaxcrank.runs.life_cli import life_columns
 
 #: the stand-in slow map dP/dN = A + B P, per coefficient (m per cycle, 1 per cycle)
 A, B = 2e-9, -2e-6
@@ -197,6 +198,7 @@ def test_cli_writes_the_life_and_resumes_a_run(tmp_path):
     rows = list(csv.DictReader((out / "life.csv").open()))
     assert float(rows[0]["cycles"]) == 0.0 and float(rows[-1]["cycles"]) == pytest.approx(150.0)
     assert float(rows[-1]["B_hole_max_depth_m"]) > 0.0 and "rms_rocker_angle_deviation_deg" in rows[0]
+    assert set(rows[0]) - {"regime"} == set(life_columns(config.load(out / "config.toml")))  # --metric's choices
     profiles = list(csv.DictReader((out / "profiles.csv").open()))
     assert len(profiles) == len(rows) * 2 * 360 and {"cycles", "joint", "surface", "angle_deg", "depth_m"} <= set(
         profiles[0]
@@ -219,3 +221,8 @@ def test_cli_writes_the_life_and_resumes_a_run(tmp_path):
 def test_cli_without_a_worn_joint_says_what_to_do(tmp_path):
     done = _cli("--mechanism", "paper", "--cycles", "10", "--out", str(tmp_path / "x"))
     assert done.returncode == 2 and "--wear" in done.stderr
+    # a misspelt --metric is refused before the run, not after it
+    done = _cli("--mechanism", "paper", "--wear", "B", "--cycles", "1e6", "--metric", "nosuch", "--limit", "1",
+                "--out", str(tmp_path / "y"))  # fmt: skip
+    assert done.returncode == 2 and "'nosuch' is not a column of life.csv" in done.stderr
+    assert not (tmp_path / "y" / "checkpoint.json").exists()

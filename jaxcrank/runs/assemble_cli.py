@@ -21,7 +21,7 @@ def add_arguments(p) -> None:
         "poses found, each dyad's branch, and the branch and guess lines that keep this assembly."
     )
     config.add_mechanism_arguments(p, "assemble")
-    p.add_argument("--angle", type=float, help="the driver's angle, deg (default: its initial angle)")
+    p.add_argument("--angle", type=config.angle_deg, help="the driver's angle, deg (default: its initial angle)")
 
 
 def _how(lk, step) -> str:

@@ -220,6 +220,23 @@ def apply_overrides(mech: AbstractMechanism, overrides: list[str]) -> AbstractMe
     return from_dict(data, base=mech)
 
 
+def angle_deg(text: str) -> float:
+    """An ``--angle`` in degrees (an argparse type): finite, reduced to [0, 360).
+
+    Raises:
+        argparse.ArgumentTypeError: not a finite number."""
+    import argparse
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (deg)") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite angle (deg)")
+    return value % 360.0
+
+
 def check_resume(out: Path, resume: bool) -> None:
     """The check of a command's ``--resume``, before it creates anything: a run can only be
     continued in a directory that exists.

@@ -107,6 +107,20 @@ def _checkpoint(out: Path, run, rows, section_state=None) -> None:
     tmp.replace(out / "checkpoint.json")
 
 
+def life_columns(mech) -> list[str]:
+    """The numeric columns of a life run's ``life.csv`` ([`jaxcrank.analysis.life.Life.row`][]): each worn
+    joint's wear, then the steady state's metrics, units in the names."""
+    from ..numerics import tracking
+    from ..numerics import wear_run as nw
+    from ..physics import signals
+
+    rate = "hole_wear_m3_per_cycle"
+    per_joint = ("hole_max_depth_m", "pin_max_depth_m", "hole_volume_m3", "pin_volume_m3", "clearance_m", rate)
+    wear = [f"{j}_{c}" for j in nw.worn_joints(mech) for c in (*per_joint, f"{rate}_ci95_low", f"{rate}_ci95_high")]
+    metrics = list(signals.metric_definitions(mech)) + [tracking.whole_run_name(n) for n in signals.force_metrics(mech)]
+    return ["cycles", *wear, *metrics]
+
+
 def run(args) -> int:
     """Run ``jaxcrank life`` from parsed arguments; returns the exit status."""
     import jax.numpy as jnp
@@ -128,6 +142,8 @@ def run(args) -> int:
         )
     if (args.metric is None) != (args.limit is None):
         raise ParameterError("--metric and --limit go together")
+    if args.metric is not None and args.metric not in life_columns(mech):  # before hours of life, not after
+        raise ParameterError(f"--metric {args.metric!r} is not a column of life.csv: {', '.join(life_columns(mech))}")
     if not (args.cycles > 0 and math.isfinite(args.cycles)):
         raise ParameterError(f"--cycles = {args.cycles!r} must be a positive number")
     out: Path = args.out

@@ -198,7 +198,8 @@ def _save_drawing(mech, path) -> None:
 
 
 def headline_text(metrics: dict) -> str:
-    """The largest deviations and the RMS transmission-angle error, in words."""
+    """The largest deviations and the RMS transmission-angle error, in words; without those (a
+    linkage without ``[outputs]``), the largest peak contact force and the peak driving moment."""
     parts = []
     for name, value in metrics.items():
         if name.startswith("max_abs_") and name.endswith("_deviation_m"):
@@ -207,6 +208,14 @@ def headline_text(metrics: dict) -> str:
             parts.append(f"max |{name[8:-14].replace('_', ' ')} dev| = {value:.4f} deg")
     if "rms_transmission_angle_error_deg" in metrics:
         parts.append(f"RMS transmission-angle error = {metrics['rms_transmission_angle_error_deg']:.4f} deg")
+    if parts:
+        return ", ".join(parts)
+    forces = {k: v for k, v in metrics.items() if k.startswith("peak_contact_force_") and "_whole_run" not in k}
+    if forces:
+        name = max(forces, key=forces.get)
+        parts.append(f"peak contact force at {name[len('peak_contact_force_') : -2]} = {forces[name]:.4g} N")
+    if "peak_driving_moment_N_m" in metrics:
+        parts.append(f"peak driving moment = {metrics['peak_driving_moment_N_m']:.4g} N m")
     return ", ".join(parts)
 
 

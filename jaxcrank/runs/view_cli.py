@@ -23,7 +23,7 @@ def add_draw_arguments(p) -> None:
         "and print its kinematic summary."
     )
     config.add_mechanism_arguments(p, "draw")
-    p.add_argument("--angle", type=float, help="the driver's angle, deg (default: its initial angle)")
+    p.add_argument("--angle", type=config.angle_deg, help="the driver's angle, deg (default: its initial angle)")
     p.add_argument(
         "--out", type=Path, default=Path("linkage.png"), help="the drawing: .png, .svg or .pdf (default linkage.png)"
     )
