@@ -265,3 +265,10 @@ def test_samples_start_at_the_driver_initial_angle():
     assert s["output"]["stroke_m"] == pytest.approx(base["output"]["stroke_m"], rel=1e-12)
     assert _turn(s["output"]["max_at_driver_deg"] + 30.0, base["output"]["max_at_driver_deg"]) < 1e-9
     assert np.isclose(s["time_ratio"]["ratio"], base["time_ratio"]["ratio"], rtol=1e-12)
+
+
+def test_a_driver_angle_is_printed_within_one_turn():
+    """359.97 deg prints as 0.0 (the turn's start), not 360.0."""
+    from jaxcrank.analysis.kinematic_summary import _at
+
+    assert (_at(359.97), _at(359.94), _at(0.04)) == ("0.0", "359.9", "0.0")

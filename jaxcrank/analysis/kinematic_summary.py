@@ -147,6 +147,11 @@ def _extreme(y: np.ndarray, pick) -> tuple[float, float]:
     return ((k + shift) * 360.0 / n) % 360.0, b - 0.25 * (a - c) * shift
 
 
+def _at(angle_deg: float) -> str:
+    """A driver angle in [0, 360) deg to 0.1 deg (359.97 is 0.0, the turn's start, not 360.0)."""
+    return f"{round(angle_deg, 1) % 360.0:.1f}"
+
+
 def _extremes(y: np.ndarray, unit: str) -> dict:
     """The global minimum and maximum of the periodic samples ``y`` and their driver angles."""
     (low_at, low), (high_at, high) = _extreme(y, np.argmin), _extreme(y, np.argmax)
@@ -305,7 +310,8 @@ def format_summary(summary: dict) -> list[str]:
     elif out["full_rotation"]:
         lines.append(f"output {out['body']} {out['coordinate']}: turns through whole revolutions")
     else:
-        where = f"min at {out['min_at_driver_deg']:.1f} deg, max at {out['max_at_driver_deg']:.1f} deg of the {driver}"
+        low, high = _at(out["min_at_driver_deg"]), _at(out["max_at_driver_deg"])
+        where = f"min at {low} deg, max at {high} deg of the {driver}"
         if out["coordinate"] == "angle":
             size = f"swing {out['swing_deg']:.2f} deg ({out['min_deg']:.2f} .. {out['max_deg']:.2f} deg; {where})"
         else:
@@ -320,8 +326,8 @@ def format_summary(summary: dict) -> list[str]:
     mu = summary["transmission_angle"]
     if mu is not None:
         lines.append(
-            f"transmission angle {mu['min_deg']:.1f} .. {mu['max_deg']:.1f} deg (min at {mu['min_at_driver_deg']:.1f}"
-            f" deg, max at {mu['max_at_driver_deg']:.1f} deg of the {driver}; largest deviation from 90 deg: "
+            f"transmission angle {mu['min_deg']:.1f} .. {mu['max_deg']:.1f} deg (min at {_at(mu['min_at_driver_deg'])}"
+            f" deg, max at {_at(mu['max_at_driver_deg'])} deg of the {driver}; largest deviation from 90 deg: "
             f"{mu['max_deviation_from_90_deg']:.1f} deg)"
         )
     for loop in summary["grashof"]:

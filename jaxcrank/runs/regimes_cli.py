@@ -107,7 +107,7 @@ def regime_map(table, mech, names, path: Path) -> Path:
     from matplotlib.colors import ListedColormap
 
     from ..physics.parameters import parameter_unit
-    from .plots import DPI, style
+    from .plots import DPI, _label, style
     from .sweep_table import parameter_columns
 
     cols = parameter_columns(mech, names)
@@ -134,8 +134,8 @@ def regime_map(table, mech, names, path: Path) -> Path:
                     color="red" if np.isnan(k) else "black", fontsize=9)  # fmt: skip
         ax.set_xticks(np.arange(len(ub)), [f"{v:.4g}" for v in ub], rotation=45 if len(ub) > 6 else 0)
         ax.set_yticks(np.arange(len(ua)), [f"{v:.4g}" for v in ua])
-        ax.set_xlabel(f"{names[1]} ({parameter_unit(mech, names[1])})")
-        ax.set_ylabel(f"{names[0]} ({parameter_unit(mech, names[0])})")
+        ax.set_xlabel(_label(f"{names[1]}_{parameter_unit(mech, names[1])}"))
+        ax.set_ylabel(_label(f"{names[0]}_{parameter_unit(mech, names[0])}"))
         title = f"Regime map, {mech.linkage().name}"
         ax.set_title(f"{title} (x: failed or invalid)" if np.isnan(code).any() else title, loc="left")
         fig.savefig(path, dpi=DPI)
