@@ -8,6 +8,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from .plots import DPI, style
 
@@ -96,6 +97,8 @@ def metrics_figure(rows, joints, path: Path) -> Path:
             ax.set_visible(False)
         for ax in flat[:panels]:
             ax.set_xlabel("cycles")
+            ax.xaxis.set_major_locator(MaxNLocator(5))  # cycle counts are long numbers: few ticks, powers of ten
+            ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
         fig.tight_layout()
         fig.savefig(path, dpi=DPI)
         plt.close(fig)
