@@ -133,6 +133,13 @@ def _set(mech: AbstractMechanism, name: str, x) -> tuple[AbstractMechanism, list
     return mech, paths
 
 
+def _run_checks(module: eqx.Module) -> None:
+    """Every ``__check_init__`` of ``module``'s classes, as its constructor ran them."""
+    for cls in type(module).__mro__:
+        if "__check_init__" in vars(cls):
+            vars(cls)["__check_init__"](module)
+
+
 def _checked(mech: AbstractMechanism, changed) -> AbstractMechanism:
     """``mech`` once every Module along the ``(name, paths)`` in ``changed`` passed its own
     checks again (``eqx.tree_at`` skips them; values that are JAX tracers are not checked:
@@ -145,9 +152,7 @@ def _checked(mech: AbstractMechanism, changed) -> AbstractMechanism:
                 modules += [node] if isinstance(node, eqx.Module) else []
             try:
                 for module in reversed(modules):
-                    for cls in type(module).__mro__:
-                        if "__check_init__" in vars(cls):
-                            vars(cls)["__check_init__"](module)
+                    _run_checks(module)
             except ParameterError as err:
                 raise ParameterError(str(err) if str(err).startswith(name) else f"{name}: {err}") from None
     return mech
@@ -165,9 +170,7 @@ def check_values(mech: AbstractMechanism) -> None:
         if isinstance(node, eqx.Module) and id(node) not in seen:
             seen.add(id(node))
             try:  # the outer module first: its message names its own fields
-                for cls in type(node).__mro__:
-                    if "__check_init__" in vars(cls):
-                        vars(cls)["__check_init__"](node)
+                _run_checks(node)
             except ParameterError as err:
                 raise ParameterError(f"{'.'.join(path)}: {err}" if path else str(err)) from None
             for field in dataclasses.fields(node):
