@@ -131,12 +131,12 @@ def _progress(names, params):
 TRANSIENT_RATIO = 2.0
 
 
-def _transient(turns: np.ndarray, misfit: np.ndarray) -> list[str]:
+def _transient(turns: np.ndarray, residuals: np.ndarray) -> list[str]:
     """A note when the residuals (signal units) of the trace's first revolution exceed its last's
     by `TRANSIENT_RATIO` in RMS: a start-up the steady orbit does not have; else none."""
-    if turns.max(initial=0) < 1 or not np.all(np.isfinite(misfit)):
+    if turns.max(initial=0) < 1 or not np.all(np.isfinite(residuals)):
         return []
-    first, last = (float(np.sqrt(np.mean(misfit[turns == k] ** 2))) for k in (0, turns.max()))
+    first, last = (float(np.sqrt(np.mean(residuals[turns == k] ** 2))) for k in (0, turns.max()))
     if not first > TRANSIENT_RATIO * last:
         return []
     return [
